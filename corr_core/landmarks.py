@@ -1,0 +1,67 @@
+"""Reading landmark vertex-id files (``vid,Name`` lines or bare ids), with 1-based file detection."""
+from __future__ import annotations
+
+import os
+import warnings
+
+import numpy as np
+
+
+def read_landmarks(path: str | os.PathLike, n_vertices: int | None = None) -> tuple[np.ndarray, list[str]]:
+    """Read landmark vertex ids and names.
+
+    Each non-empty line is ``vid,Name`` or a bare integer ``vid`` (then the name is ``str(vid)`` of the
+    0-based id). The file's last line may lack a newline.
+
+    1-based files: when ``n_vertices`` is given, a file that contains the id ``n_vertices`` (one past the
+    last 0-based id) and no id 0 is taken to be 1-based; every id is decremented and a ``UserWarning`` is
+    issued. A file with both 0 and ``n_vertices`` is inconsistent and raises.
+
+    Args:
+        path: text file.
+        n_vertices: number of vertices of the mesh the ids refer to (enables range checks and 1-based
+            detection); None skips both except the non-negativity check.
+    Returns:
+        ids: (k,) int64 0-based vertex ids, in file order.
+        names: list of k names.
+    Raises:
+        ValueError: unparsable line or id out of range; the message names the file and the (1-based) line.
+    """
+    path = os.fspath(path)
+    ids: list[int] = []
+    names: list[str | None] = []
+    line_nos: list[int] = []
+    with open(path, "r", encoding="utf-8") as fh:
+        for line_no, raw in enumerate(fh, start=1):
+            line = raw.strip()
+            if not line or line.startswith("#"):
+                continue
+            head, _, name = line.partition(",")
+            try:
+                vid = int(head.strip())
+            except ValueError:
+                raise ValueError(f"{path}:{line_no}: expected 'vid,Name' or an integer id, got {line!r}") from None
+            if vid < 0:
+                raise ValueError(f"{path}:{line_no}: negative vertex id {vid}")
+            ids.append(vid)
+            names.append(name.strip() or None)
+            line_nos.append(line_no)
+    arr = np.asarray(ids, dtype=np.int64)
+    if n_vertices is not None and len(arr):
+        has_n, has_zero = bool(np.any(arr == n_vertices)), bool(np.any(arr == 0))
+        if has_n and has_zero:
+            bad = line_nos[int(np.flatnonzero(arr == n_vertices)[0])]
+            raise ValueError(
+                f"{path}:{bad}: id {n_vertices} is out of range 0..{n_vertices - 1}, and the file also holds id 0,"
+                " so it is not simply 1-based"
+            )
+        if has_n:
+            warnings.warn(f"{path}: contains id {n_vertices} == number of vertices and no 0: "
+                          "treating the file as 1-based and subtracting 1", UserWarning, stacklevel=2)
+            arr = arr - 1
+        over = np.flatnonzero(arr >= n_vertices)
+        if len(over):
+            i = int(over[0])
+            raise ValueError(f"{path}:{line_nos[i]}: vertex id {ids[i]} is out of range 0..{n_vertices - 1}")
+    out_names = [nm if nm is not None else str(int(v)) for nm, v in zip(names, arr)]
+    return arr, out_names

@@ -1,0 +1,158 @@
+"""Grayscale views of a mesh from cameras circling the y axis (CPU ray casting with Open3D).
+
+World frame: y is up. ``rotate_about_y(V, a)`` applies the standard right-handed rotation
+``Ry(a) = [[cos a, 0, sin a], [0, 1, 0], [-sin a, 0, cos a]]``, so a positive angle turns +x toward -z
+and +z toward +x (counter-clockwise seen from +y looking down).
+
+View order: view k is taken by camera k = Ry(k * 2 pi / n_views) applied to camera 0; camera 0 sits on
+the +z side, ``elevation_deg`` above the xz plane, looking at the origin, with image-up the
+projection of +y. Because camera k is camera 0 rotated by Ry(k * step), rotating the *shape* by
+Ry(s * step) moves what camera k saw to camera k + s:
+
+    render_views(rotate_about_y(V, s * 2 pi / n), F)[(k + s) % n] == render_views(V, F)[k]
+
+(exactly up to floating-point rounding of the rays, since the ray sets are themselves rotated copies).
+Projection is orthographic with a square window of half-width ``margin`` world units centred on the
+origin, so a normalized mesh (centred, radius <= 1) is always fully in view.
+
+Shading: white background (1.0); surface = ambient + diffuse * |n . d| with d the ray direction (a
+headlight attached to the camera) and n the face normal. The absolute value makes shading
+double-sided, as the meshes are not watertight and their normals are not consistently oriented.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from corr_core._open3d import load_open3d
+
+
+def rotation_about_y(angle_rad: float) -> np.ndarray:
+    """Return the (3, 3) right-handed rotation by ``angle_rad`` about +y (+angle turns +x toward -z)."""
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rotate_about_y(V: np.ndarray, angle_rad: float) -> np.ndarray:
+    """Rotate points about the y axis through the origin.
+
+    Args:
+        V: (n, 3) float points.
+        angle_rad: rotation angle in radians; +angle turns +x toward -z (standard Ry matrix).
+    Returns:
+        (n, 3) rotated points, same dtype as ``V`` for float input.
+    """
+    V = np.asarray(V)
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise ValueError(f"V must be (n, 3), got shape {V.shape}")
+    out_dtype = V.dtype if np.issubdtype(V.dtype, np.floating) else np.float64
+    return (V @ rotation_about_y(angle_rad).T).astype(out_dtype, copy=False)
+
+
+def camera_frames(n_views: int = 16, elevation_deg: float = 20.0) -> np.ndarray:
+    """Orthonormal camera frames of the view circle.
+
+    Args:
+        n_views: number of cameras, 2 pi / n_views apart in azimuth.
+        elevation_deg: camera elevation above the xz plane, degrees.
+    Returns:
+        (n_views, 3, 3) float64: rows [right, up, back] of each camera; ``back`` points from the origin
+        to the camera (the camera looks along -back). Frame k = Ry(k * 2 pi / n_views) @ frame 0.
+    """
+    elevation = np.deg2rad(elevation_deg)
+    back = np.array([0.0, np.sin(elevation), np.cos(elevation)])
+    right = np.array([1.0, 0.0, 0.0])
+    up = np.cross(back, right)  # = (0, cos e, -sin e): +y tilted away from the camera
+    frame0 = np.stack([right, up, back])  # rows
+    step = 2.0 * np.pi / n_views
+    return np.stack([frame0 @ rotation_about_y(k * step).T for k in range(n_views)])
+
+
+def view_rays(
+    n_views: int = 16, image_size: int = 120, elevation_deg: float = 20.0, margin: float = 1.05
+) -> np.ndarray:
+    """Orthographic rays of every pixel of every view.
+
+    Args:
+        n_views, elevation_deg: see ``camera_frames``.
+        image_size: pixels per side (square images).
+        margin: half-width of the square view window in world units (1.05 keeps a unit sphere in view).
+    Returns:
+        (n_views, image_size, image_size, 6) float32 rays [origin, unit direction]; row 0 is the top
+        of the image; origins lie 3 units from the origin, outside the unit sphere.
+    """
+    frames = camera_frames(n_views, elevation_deg)
+    centres = (np.arange(image_size) + 0.5) / image_size * 2.0 - 1.0
+    u = centres * margin  # image x (columns, left -> right)
+    v = -centres * margin  # image y (rows, top -> bottom), so world-up is image-up
+    right, up, back = frames[:, 0], frames[:, 1], frames[:, 2]
+    origins = (
+        3.0 * back[:, None, None, :]
+        + u[None, None, :, None] * right[:, None, None, :]
+        + v[None, :, None, None] * up[:, None, None, :]
+    )
+    directions = np.broadcast_to(-back[:, None, None, :], origins.shape)
+    return np.concatenate([origins, directions], axis=-1).astype(np.float32)
+
+
+def face_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Return (m, 3) float32 unit face normals; degenerate faces get a zero normal."""
+    V = np.asarray(V, dtype=np.float64)
+    normals = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0).astype(np.float32)
+
+
+def render_views(
+    V: np.ndarray,
+    F: np.ndarray,
+    n_views: int = 16,
+    image_size: int = 120,
+    elevation_deg: float = 20.0,
+    margin: float = 1.05,
+    ambient: float = 0.1,
+    diffuse: float = 0.75,
+    supersample: int = 1,
+) -> np.ndarray:
+    """Render shaded grayscale views of a mesh from cameras on a circle around the y axis.
+
+    See the module docstring for the world frame, the view order (shifting views == rotating the
+    shape about y) and the shading model.
+
+    Args:
+        V: (n, 3) float vertices of a normalized mesh (centred at the origin, radius <= 1, y up).
+        F: (m, 3) int triangles.
+        n_views: views, 2 pi / n_views apart in azimuth.
+        image_size: output pixels per side.
+        elevation_deg: camera elevation above the xz plane, degrees.
+        margin: half-width of the orthographic window, world units.
+        ambient, diffuse: shade = ambient + diffuse * |n . d|; keep the sum < 1 so the object stays
+            distinguishable from the white background.
+        supersample: render at ``supersample`` x the resolution and box-average (anti-aliasing).
+    Returns:
+        (n_views, image_size, image_size) float32 in [0, 1], background 1.0.
+    """
+    V = np.asarray(V, dtype=np.float32)
+    F = np.asarray(F)
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise ValueError(f"V must be (n, 3), got shape {V.shape}")
+    if F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
+        raise ValueError(f"F must be a non-empty (m, 3) triangle array, got shape {F.shape}")
+    if F.min() < 0 or F.max() >= len(V):
+        raise ValueError(f"F indexes vertices outside [0, {len(V)})")
+    o3d = load_open3d()
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(V), o3d.core.Tensor(F.astype(np.uint32)))
+
+    size = image_size * supersample
+    rays = view_rays(n_views, size, elevation_deg, margin)
+    hits = scene.cast_rays(o3d.core.Tensor(rays))
+    hit = np.isfinite(hits["t_hit"].numpy())
+    face = hits["primitive_ids"].numpy()
+    normals = face_normals(V, F)
+
+    images = np.ones((n_views, size, size), np.float32)
+    cosine = np.abs(np.einsum("ij,ij->i", normals[face[hit]], rays[hit][:, 3:]))
+    images[hit] = ambient + diffuse * cosine
+    if supersample > 1:
+        images = images.reshape(n_views, image_size, supersample, image_size, supersample).mean(axis=(2, 4))
+    return images

@@ -1,0 +1,90 @@
+"""Joint rotation alignment by synchronization: stronger peers of the LH MRF solver on the same C_ij.
+
+Conventions as in corr_core.circular: C: (N, N, V) with C_ij(theta) = sum_v ||F_i[v] - F_j[(v+theta)%V]||^2,
+labels x in 0..V-1 with x_j - x_i ~= argmin_theta C_ij(theta) for consistent pairs; K_ij = exp(-C_ij/sigma).
+
+- ``spectral_sync``: angular synchronization (Singer 2011). H_ij = sum_theta K_ij(theta) exp(+i 2 pi theta/V)
+  (the first Fourier coefficient of the kernel, Hermitian because C_ji(theta) = C_ij(-theta)); for consistent
+  data H_ij ~ w_ij z_i conj(z_j) with z_i = exp(-i 2 pi x_i / V), so the top eigenvector's phases give
+  x_i = round(-angle(z_i) V / (2 pi) - delta) mod V (up to one global offset; delta removes the eigenvector's
+  arbitrary global phase, see ``round_phases``).
+- ``projected_power``: Chen & Candes' projected power method ("The projected power method: an efficient
+  algorithm for joint alignment from pairwise differences", CPAM 2018), hard (mu -> infinity) version:
+  z <- onehot(argmax_a (S z)_a) per node, all nodes at once, S_ij(a,b) = score_ij((b-a)%V) with the per-pair
+  mean over theta removed (their debiasing), started from ``spectral_sync``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from corr_core.circular import CirculantPairwise, _kernel, _symmetrize_costs, auto_sigma
+
+__all__ = ["sync_matrix", "spectral_sync", "round_phases", "projected_power"]
+
+
+def sync_matrix(C: np.ndarray, sigma: float | None = None, neighbors: np.ndarray | None = None,
+                harmonic: int = 1) -> np.ndarray:
+    """H: (N, N) complex128 Hermitian, H_ij = sum_theta exp(-C_ij(theta)/sigma) exp(i 2 pi harmonic theta/V),
+    zero diagonal (and zero off the optional neighbour graph, see CirculantPairwise). sigma=None: auto_sigma."""
+    if sigma is None:
+        sigma = auto_sigma(C)
+    K = _kernel(C, sigma, neighbors)
+    V = K.shape[2]
+    phase = np.exp(2j * np.pi * harmonic * np.arange(V) / V)
+    return K @ phase
+
+
+def spectral_sync(C: np.ndarray, sigma: float | None = None, neighbors: np.ndarray | None = None,
+                  normalize: bool = True) -> np.ndarray:
+    """Labels (N,) int in 0..V-1 from the top eigenvector of ``sync_matrix`` (Singer 2011), correct up to one
+    global offset. normalize=True uses the degree-normalized matrix D^-1/2 H D^-1/2, D_ii = sum_j |H_ij|
+    (Singer & Shkolnisky's variant, less dominated by a few high-degree shapes)."""
+    H = sync_matrix(C, sigma, neighbors)
+    V = np.asarray(C).shape[2]
+    if normalize:
+        deg = np.abs(H).sum(axis=1)
+        s = 1.0 / np.sqrt(np.where(deg > 0, deg, 1.0))
+        H = s[:, None] * H * s[None, :]
+    _, vecs = np.linalg.eigh(H)
+    return round_phases(vecs[:, -1], V)
+
+
+def round_phases(z: np.ndarray, V: int) -> np.ndarray:
+    """Labels (N,) int from complex z_i ~ exp(-i 2 pi x_i / V) (any common phase factor): continuous labels
+    t_i = -angle(z_i) V / (2 pi); the eigenvector's arbitrary global phase is first removed by subtracting the
+    circular mean of the fractional parts of t (so rounding cuts between steps, not through them)."""
+    t = -np.angle(z) * V / (2 * np.pi)
+    frac_shift = np.angle(np.mean(np.exp(2j * np.pi * t))) / (2 * np.pi)
+    return np.rint(t - frac_shift).astype(np.int64) % V
+
+
+def projected_power(C: np.ndarray, sigma: float | None = None, labels0: np.ndarray | None = None,
+                    score: str = "kernel", max_iter: int = 100,
+                    neighbors: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+    """Chen & Candes projected power method (hard projection) on the pairwise scores; returns
+    (labels (N,) int, iterations). score="kernel": exp(-C/sigma) (robust to outlier pairs: bounded);
+    score="log": -C/sigma (Gaussian log-likelihood). Each pair's score is centered over theta.
+    labels0=None: start from spectral_sync(C, sigma)."""
+    if sigma is None:
+        sigma = auto_sigma(C)
+    if score == "kernel":
+        S = _kernel(C, sigma, neighbors)
+    elif score == "log":
+        S = -_symmetrize_costs(C) / sigma
+        if neighbors is not None:
+            S = S * (_kernel(C, sigma, neighbors) > 0)
+    else:
+        raise ValueError(f"score must be 'kernel' or 'log', got {score!r}")
+    S = S - S.mean(axis=2, keepdims=True)
+    op = CirculantPairwise.from_kernel(S)
+    N, V = op.n_nodes, op.n_labels
+    labels = spectral_sync(C, sigma, neighbors) if labels0 is None else np.asarray(labels0, np.int64) % V
+    it = 0
+    for it in range(1, max_iter + 1):
+        Z = np.zeros((N, V))
+        Z[np.arange(N), labels] = 1.0
+        new = np.argmax(op.matvec(Z), axis=1)
+        if np.array_equal(new, labels):
+            break
+        labels = new
+    return labels, it

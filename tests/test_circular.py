@@ -1,0 +1,110 @@
+"""Tests for corr_core.circular: pair costs vs the naive loop, the circulant MRF operator vs the dense one."""
+import itertools
+
+import numpy as np
+import pytest
+
+from corr_core.circular import (CirculantPairwise, auto_sigma, dense_pairwise, mirror_pair_costs,
+                                nearest_shapes, pair_costs, pair_costs_naive, uniform_unary)
+from corr_core.mrf import DensePairwise, energy, solve_lh
+
+
+def features(N, V, D, seed):
+    return np.random.default_rng(seed).normal(size=(N, V, D)).astype(np.float32)
+
+
+def test_pair_costs_match_definition_and_naive():
+    F = features(4, 6, 5, 0)
+    C = pair_costs(F)
+    assert C.dtype == np.float32 and C.shape == (4, 4, 6)
+    Fd = F.astype(np.float64)
+    for i, j, theta in itertools.product(range(4), range(4), range(6)):
+        ref = sum(np.sum((Fd[i, v] - Fd[j, (v + theta) % 6]) ** 2) for v in range(6))
+        assert C[i, j, theta] == pytest.approx(ref, rel=1e-4, abs=1e-3)
+    np.testing.assert_allclose(C, pair_costs_naive(F), rtol=1e-4, atol=1e-3)
+
+
+@pytest.mark.parametrize("V", [5, 8, 16])
+def test_pair_costs_rectangular_and_mirror(V):
+    FA, FB = features(3, V, 7, 1), features(5, V, 7, 2)
+    C_ab = pair_costs(FA, FB)
+    assert C_ab.shape == (3, 5, V)
+    np.testing.assert_allclose(C_ab, pair_costs_naive(FA, FB), rtol=1e-4, atol=1e-3)
+    np.testing.assert_allclose(mirror_pair_costs(C_ab), pair_costs(FB, FA), rtol=1e-4, atol=1e-3)
+
+
+def test_pair_costs_zero_at_planted_rotation():
+    """Shape j = shape i rotated by s steps: F_j[(v+s)%V] == F_i[v], so C_ij(s) == 0 and only there."""
+    V, s = 16, 5
+    Fi = features(1, V, 20, 3)[0]
+    Fj = np.roll(Fi, s, axis=0)
+    np.testing.assert_array_equal(Fj[(np.arange(V) + s) % V], Fi)
+    c = pair_costs(Fi[None], Fj[None])[0, 0]
+    assert c[s] == pytest.approx(0.0, abs=1e-3)
+    assert np.argmin(c) == s and np.sort(c)[1] > 10.0
+
+
+def test_auto_sigma_is_median_of_best_pair_costs():
+    rng = np.random.default_rng(4)
+    C = rng.uniform(1, 10, size=(5, 5, 4))
+    C = 0.5 * (C + mirror_pair_costs(C))
+    best = [C[i, j].min() for i in range(5) for j in range(i + 1, 5)]
+    assert auto_sigma(C) == pytest.approx(np.median(best))
+
+
+@pytest.mark.parametrize("use_neighbors", [False, True])
+def test_circulant_matches_dense_operator(use_neighbors):
+    F = features(7, 8, 6, 5)
+    C = pair_costs(F)
+    sigma = auto_sigma(C)
+    nb = nearest_shapes(C, 2) if use_neighbors else None
+    circ, dense = CirculantPairwise(C, sigma, nb), dense_pairwise(C, sigma, nb)
+    X = np.random.default_rng(6).normal(size=(7, 8))
+    np.testing.assert_allclose(circ.matvec(X), dense.matvec(X), rtol=1e-10, atol=1e-12)
+    for j, b in itertools.product(range(7), range(8)):
+        np.testing.assert_allclose(circ.column(j, b), dense.column(j, b), atol=1e-14)
+    np.testing.assert_allclose(circ.block_max(), dense.block_max())
+    # the dense operator is the definition W[i,j,a,b] = exp(-C_ij(b-a)/sigma) (C is mirror-symmetric here)
+    i, j, a, b = 1, 4, 6, 3
+    Csym = 0.5 * (C.astype(np.float64) + mirror_pair_costs(C.astype(np.float64)))
+    expected = np.exp(-Csym[i, j, (b - a) % 8] / sigma)
+    if use_neighbors and not (j in nb[i] or i in nb[j]):
+        expected = 0.0
+    assert dense.W[i, j, a, b] == pytest.approx(expected)
+
+
+def test_neighbor_graph_is_symmetrized_and_restricts_pairs():
+    F = features(6, 4, 3, 7)
+    C = pair_costs(F)
+    nb = nearest_shapes(C, 1)
+    best = C.min(axis=2).astype(float)
+    np.fill_diagonal(best, np.inf)
+    np.testing.assert_array_equal(nb[:, 0], np.argmin(best, axis=1))
+    K = CirculantPairwise(C, 1.0, nb).K
+    edges = {(i, int(nb[i, 0])) for i in range(6)}
+    for i, j in itertools.product(range(6), range(6)):
+        on = (i, j) in edges or (j, i) in edges
+        assert (K[i, j].max() > 0) == on
+
+
+def test_lh_on_circulant_recovers_planted_rotations_and_energy_agrees_with_dense():
+    rng = np.random.default_rng(8)
+    N, V, D = 12, 16, 30
+    base = rng.normal(size=(V, D))
+    offsets = rng.integers(0, V, size=N)
+    F = np.stack([np.roll(base + 0.2 * rng.normal(size=(V, D)), o, axis=0) for o in offsets])
+    C = pair_costs(F)
+    sigma = auto_sigma(C)
+    U = uniform_unary(N, V, seed=0)
+    res = solve_lh(CirculantPairwise(C, sigma), U)
+    d = (res.labels - offsets) % V
+    assert np.all(d == d[0])
+    assert energy(dense_pairwise(C, sigma), U, res.labels) == pytest.approx(res.energy, rel=1e-10)
+    assert res.upper_bound >= res.energy
+
+
+def test_uniform_unary_is_seeded_and_in_unit_interval():
+    U = uniform_unary(10, 16, seed=3)
+    assert U.shape == (10, 16) and U.min() >= 0 and U.max() < 1
+    np.testing.assert_array_equal(U, uniform_unary(10, 16, seed=3))
+    assert not np.array_equal(U, uniform_unary(10, 16, seed=4))
