@@ -209,3 +209,33 @@ def midedge_flatten(V: np.ndarray, F: np.ndarray, cut_faces=None, seed_face: int
         return out + ({"seed_face": int(seed_face), "u": u, "conjugate_residual": residual,
                        "dirichlet_vertices": (int(v1), int(v2))},)
     return out
+
+
+def midedge_conformal_factor(V: np.ndarray, edges: np.ndarray, face_edges: np.ndarray, kept_faces: np.ndarray,
+                             Z: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Local scale of the flattening at each mid-edge point: planar length per unit surface length.
+
+    Per kept face: ``sqrt(area of the flattened mid-edge triangle / area of the 3D mid-edge triangle)`` (the
+    map is a similarity on each mid-edge triangle, so this is its scale factor). Per edge: the geometric mean
+    over the kept faces that hold it; edges on no kept face get the median factor.
+
+    Args:
+        V: (n,3), edges: (n_edges,2), face_edges: (m',3) and kept_faces: (m',) from ``midedge_flatten``,
+        Z: (n_edges,) complex, F: (m,3) original faces.
+    Returns:
+        (n_edges,) float > 0.
+    """
+    V = np.asarray(V, dtype=float)
+    Fk = np.asarray(F)[kept_faces]
+    area3 = 0.125 * np.linalg.norm(np.cross(V[Fk[:, 1]] - V[Fk[:, 0]], V[Fk[:, 2]] - V[Fk[:, 0]]), axis=1)
+    P = Z[face_edges]
+    area2 = 0.5 * np.abs(np.imag(np.conj(P[:, 1] - P[:, 0]) * (P[:, 2] - P[:, 0])))
+    logf = 0.5 * np.log(np.maximum(area2, 1e-300) / np.maximum(area3, 1e-300))
+    s = np.zeros(len(edges))
+    c = np.zeros(len(edges))
+    np.add.at(s, face_edges.ravel(), np.repeat(logf, 3))
+    np.add.at(c, face_edges.ravel(), 1.0)
+    out = np.full(len(edges), np.nan)
+    out[c > 0] = np.exp(s[c > 0] / c[c > 0])
+    out[c == 0] = np.nanmedian(out)
+    return out

@@ -154,15 +154,39 @@ def _batch_mutual(D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return mutual, j
 
 
-def _distances(A: np.ndarray, B: np.ndarray, metric: str) -> np.ndarray:
-    """(T,p) and (T,q) complex -> (T,p,q) distances in the canonical frame."""
+def mobius_derivative_abs(coeffs: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """|f'(z)| = |ad - bc| / |c z + d|^2 for coeffs (...,4) and z (n,) -> (..., n)."""
+    c = np.asarray(coeffs, dtype=complex)[..., None, :]
+    det = c[..., 0] * c[..., 3] - c[..., 1] * c[..., 2]
+    with np.errstate(divide="ignore"):
+        return np.abs(det) / np.abs(c[..., 2] * np.asarray(z)[None, :] + c[..., 3]) ** 2
+
+
+def _distances(A: np.ndarray, B: np.ndarray, metric: str, LA: np.ndarray | None = None,
+               LB: np.ndarray | None = None) -> np.ndarray:
+    """(T,p) and (T,q) complex -> (T,p,q) distances in the canonical frame.
+
+    ``surface``: planar distance divided by the local planar scale sqrt(LA LB) (LA, LB: (T,p), (T,q) planar
+    length per unit length), i.e. an estimate of the distance on the surface, in the unit that ``lam`` uses.
+    """
     if metric == "plane":
         D = np.abs(A[:, :, None] - B[:, None, :])
     elif metric == "sphere":
         D = np.linalg.norm(to_sphere(A)[:, :, None, :] - to_sphere(B)[:, None, :, :], axis=-1)
+    elif metric == "surface":
+        if LA is None or LB is None:
+            raise ValueError("metric 'surface' needs the local scales (lam_*) of both point sets")
+        D = np.abs(A[:, :, None] - B[:, None, :]) / np.sqrt(LA[:, :, None] * LB[:, None, :])
     else:
-        raise ValueError(f"unknown metric {metric!r} (use 'plane' or 'sphere')")
+        raise ValueError(f"unknown metric {metric!r} (use 'plane', 'sphere' or 'surface')")
     return np.where(np.isnan(D), np.inf, D)
+
+
+def _map_points(m: np.ndarray, Z: np.ndarray, lam: np.ndarray | None):
+    """Map points by (T,4) maps -> positions (T,n) and, if lam (n,) is given, local scales (T,n)."""
+    A = apply_mobius(m, Z)
+    L = None if lam is None else np.asarray(lam)[None, :] * mobius_derivative_abs(m, Z)
+    return A, L
 
 
 def triplet_pairs(n_source: int, n_target: int) -> tuple[np.ndarray, np.ndarray]:
@@ -179,21 +203,24 @@ def triplet_pairs(n_source: int, n_target: int) -> tuple[np.ndarray, np.ndarray]
 
 
 def score_maps(ms: np.ndarray, mt: np.ndarray, Zs_samples: np.ndarray, Zt_samples: np.ndarray, K: float = 0.3,
-               metric: str = "plane", chunk: int = 256) -> np.ndarray:
+               metric: str = "plane", lam_s: np.ndarray | None = None, lam_t: np.ndarray | None = None,
+               chunk: int = 256) -> np.ndarray:
     """Score Möbius map pairs by the fraction of source samples mutually closest to a target sample within K.
 
     Args:
         ms, mt: (T, 4) complex canonical-frame maps of source and target.
         Zs_samples: (p,) complex, Zt_samples: (q,) complex flattened samples.
+        metric: "plane", "sphere" or "surface" (needs lam_s, lam_t: (p,), (q,) planar length per unit of K
+            at each sample, e.g. ``midedge_conformal_factor`` times the unit length on the surface).
     Returns:
         (T,) float in [0, 1], the fraction (over min(p, q) samples).
     """
     out = np.empty(len(ms))
     denom = min(len(Zs_samples), len(Zt_samples))
     for s in range(0, len(ms), chunk):          # chunks bound memory: T*p*q distances
-        A = apply_mobius(ms[s:s + chunk], Zs_samples)
-        B = apply_mobius(mt[s:s + chunk], Zt_samples)
-        D = _distances(A, B, metric)
+        A, LA = _map_points(ms[s:s + chunk], Zs_samples, lam_s)
+        B, LB = _map_points(mt[s:s + chunk], Zt_samples, lam_t)
+        D = _distances(A, B, metric, LA, LB)
         mutual, j = _batch_mutual(D)
         d = np.take_along_axis(D, j[:, :, None], axis=2)[:, :, 0]
         out[s:s + chunk] = (mutual & (d < K)).sum(axis=1) / denom
@@ -202,7 +229,8 @@ def score_maps(ms: np.ndarray, mt: np.ndarray, Zs_samples: np.ndarray, Zt_sample
 
 def mobius_vote_landmarks(Zs_samples: np.ndarray, Zt_samples: np.ndarray, Zs_landmarks: np.ndarray,
                           Zt_landmarks: np.ndarray, K: float = 0.3, metric: str = "plane",
-                          n_best: int = 20) -> dict:
+                          n_best: int = 20, lam_samples: tuple | None = None,
+                          lam_landmarks: tuple | None = None, power: float = 1.0) -> dict:
     """Möbius voting over all landmark triplet pairs.
 
     Every 3-subset of source landmarks is paired with every ordered triple of target landmarks; each pair
@@ -214,8 +242,11 @@ def mobius_vote_landmarks(Zs_samples: np.ndarray, Zt_samples: np.ndarray, Zs_lan
         Zt_samples: (q,) complex, flattened target samples.
         Zs_landmarks: (k,) complex, Zt_landmarks: (k2,) complex, flattened landmarks (k, k2 >= 3).
         K: distance threshold in canonical-frame units.
-        metric: "plane" or "sphere" (see module docstring).
+        metric: "plane", "sphere" or "surface" (see module docstring).
         n_best: how many best maps to return.
+        lam_samples: (lam_s (p,), lam_t (q,)) local scales for metric "surface" (see ``score_maps``).
+        lam_landmarks: (lam_s (k,), lam_t (k2,)) local scales at the landmarks, for metric "surface".
+        power: a map votes with weight ``score ** power`` (larger: only the best maps matter).
     Returns:
         dict with ``pred`` (k,) int (target landmark for each source landmark, -1 if k > k2 and unmatched),
         ``votes`` (k, k2) float, ``best_maps`` list of dicts (score, ms, mt, src triplet, tgt triplet,
@@ -226,25 +257,32 @@ def mobius_vote_landmarks(Zs_samples: np.ndarray, Zt_samples: np.ndarray, Zs_lan
     src, tgt = triplet_pairs(len(Zs_landmarks), len(Zt_landmarks))
     ms = mobius_to_canonical(Zs_landmarks[src])
     mt = mobius_to_canonical(Zt_landmarks[tgt])
-    scores = score_maps(ms, mt, Zs_samples, Zt_samples, K=K, metric=metric)
+    ls, lt = lam_samples if lam_samples is not None else (None, None)
+    scores = score_maps(ms, mt, Zs_samples, Zt_samples, K=K, metric=metric, lam_s=ls, lam_t=lt)
 
-    A = apply_mobius(ms, Zs_landmarks)
-    B = apply_mobius(mt, Zt_landmarks)
-    D = _distances(A, B, metric)
+    ls, lt = lam_landmarks if lam_landmarks is not None else (None, None)
+    A, LA = _map_points(ms, Zs_landmarks, ls)
+    B, LB = _map_points(mt, Zt_landmarks, lt)
+    D = _distances(A, B, metric, LA, LB)
     mutual, j = _batch_mutual(D)
     d = np.take_along_axis(D, j[:, :, None], axis=2)[:, :, 0]
     ok = mutual & (d < K)
     t_idx, i_idx = np.nonzero(ok)
     votes = np.zeros((len(Zs_landmarks), len(Zt_landmarks)))
-    np.add.at(votes, (i_idx, j[t_idx, i_idx]), scores[t_idx])
+    np.add.at(votes, (i_idx, j[t_idx, i_idx]), scores[t_idx] ** power)
 
     rows, cols = linear_sum_assignment(-votes)
     pred = np.full(len(Zs_landmarks), -1, dtype=np.int64)
     pred[rows] = cols
-    order = np.argsort(-scores, kind="stable")[:n_best]
-    best = [{"score": float(scores[t]), "ms": ms[t], "mt": mt[t], "src": src[t], "tgt": tgt[t],
-             "coeffs": compose_mobius(invert_mobius(mt[t]), ms[t])} for t in order]
-    return {"pred": pred, "votes": votes, "best_maps": best, "scores": scores}
+    def as_dict(t):
+        return {"score": float(scores[t]), "ms": ms[t], "mt": mt[t], "src": src[t], "tgt": tgt[t],
+                "coeffs": compose_mobius(invert_mobius(mt[t]), ms[t])}
+
+    order = np.argsort(-scores, kind="stable")
+    agrees = np.all(pred[src] == tgt, axis=1)
+    return {"pred": pred, "votes": votes, "scores": scores,
+            "best_maps": [as_dict(t) for t in order[:n_best]],
+            "consensus_maps": [as_dict(t) for t in order[agrees[order]]]}
 
 
 def extend_landmarks(best_maps: list, Zs_all_landmarks: np.ndarray, Zt_candidates: np.ndarray, top: int = 10,
@@ -303,3 +341,30 @@ def dense_map(best_map: dict, Zs_all: np.ndarray, Zt_all: np.ndarray, metric: st
     if metric == "sphere":
         return cKDTree(to_sphere(B)).query(to_sphere(A))[1].astype(np.int64)
     return cKDTree(_xy(B)).query(_xy(A))[1].astype(np.int64)
+
+
+def fit_mobius(z: np.ndarray, w: np.ndarray, refine: bool = True) -> np.ndarray:
+    """Least-squares Möbius map with f(z_i) ~ w_i (orientation-preserving; pass conj(z) for anti-Möbius).
+
+    Algebraic fit (smallest singular vector of ``a z + b - c z w - d w = 0``, rows normalized) followed, with
+    ``refine``, by Levenberg-Marquardt on the geometric residual ``|f(z_i) - w_i|``.
+
+    Args:
+        z, w: (n,) complex, n >= 3, finite.
+    Returns:
+        (4,) complex coefficients (a, b, c, d), ``ad - bc = 1``.
+    """
+    from scipy.optimize import least_squares
+
+    z = np.asarray(z, dtype=complex)
+    w = np.asarray(w, dtype=complex)
+    A = np.stack([z, np.ones_like(z), -z * w, -w], axis=1)
+    A /= np.linalg.norm(A, axis=1, keepdims=True)
+    coeffs = np.conj(np.linalg.svd(A, full_matrices=False)[2][-1])
+    if refine:
+        def residual(x):
+            r = apply_mobius(x[:4] + 1j * x[4:], z)[0] - w
+            return np.r_[r.real, r.imag]
+        x = least_squares(residual, np.r_[coeffs.real, coeffs.imag], method="lm").x
+        coeffs = x[:4] + 1j * x[4:]
+    return _normalize(coeffs.reshape(2, 2)).ravel()

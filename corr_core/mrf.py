@@ -101,7 +101,10 @@ class LHResult:
     energy: E(labels).
     relaxed: (n, L) float, the relaxed optimum of step 1 (each row unit L2 norm).
     relaxed_value: x.M.x/2 + U.x at ``relaxed`` (the quantity step 1 increases). This is a local value of the
-        relaxation, NOT guaranteed to bound E from above; use ``upper_bound`` for that.
+        relaxation, NOT guaranteed to bound E from above (and for dense non-negative W it can exceed max E
+        many times over, since unit-L2 rows spread mass over all labels); use ``upper_bound`` for a bound.
+    simplex_value: the same expression at the simplex rows (step 2), i.e. the expected energy when each node
+        draws its label independently from its simplex row.
     upper_bound: a valid upper bound on E over all discrete labelings (see ``upper_bound()``), or nan if
         ``compute_bound=False``.
     iterations: number of step-1 iterations.
@@ -114,6 +117,7 @@ class LHResult:
     energy: float
     relaxed: np.ndarray
     relaxed_value: float
+    simplex_value: float
     upper_bound: float
     iterations: int
     converged: bool
@@ -208,7 +212,7 @@ def leading_eigenvalue(pairwise) -> float:
     n, L = pairwise.n_nodes, pairwise.n_labels
     N = n * L
     if N <= 400:
-        M = np.column_stack([pairwise.matvec(e.reshape(n, L)) .reshape(-1) for e in np.eye(N)])
+        M = np.column_stack([pairwise.matvec(e.reshape(n, L)).reshape(-1) for e in np.eye(N)])
         return float(np.linalg.eigvalsh(0.5 * (M + M.T))[-1])
     op = LinearOperator((N, N), matvec=lambda v: pairwise.matvec(np.asarray(v).reshape(n, L)).reshape(-1),
                         dtype=np.float64)
@@ -271,10 +275,11 @@ def solve_lh(pairwise, unary: np.ndarray, max_iter: int = 1000, tol: float = 1e-
             break
     relaxed_value = float(0.5 * np.sum(x * pairwise.matvec(x)) + np.sum(unary * x))
     simplex = _rows_to_simplex(x)
+    simplex_value = float(0.5 * np.sum(simplex * pairwise.matvec(simplex)) + np.sum(unary * simplex))
     start = np.argmax(simplex, axis=1).astype(np.int64)
     e_start = energy(pairwise, unary, start)
     labels, moves = climb(pairwise, unary, start)
     bound = upper_bound(pairwise, unary) if compute_bound else float("nan")
     return LHResult(labels=labels, energy=energy(pairwise, unary, labels), relaxed=x,
-                    relaxed_value=relaxed_value, upper_bound=bound, iterations=it, converged=converged,
+                    relaxed_value=relaxed_value, simplex_value=simplex_value, upper_bound=bound, iterations=it, converged=converged,
                     energy_before_climb=e_start, climb_moves=moves)

@@ -21,6 +21,8 @@ double-sided, as the meshes are not watertight and their normals are not consist
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from corr_core._open3d import load_open3d
@@ -94,6 +96,12 @@ def view_rays(
     return np.concatenate([origins, directions], axis=-1).astype(np.float32)
 
 
+@functools.lru_cache(maxsize=8)
+def _cached_view_rays(n_views: int, image_size: int, elevation_deg: float, margin: float):
+    """``view_rays`` as an Open3D tensor, cached: the rays only depend on the camera parameters."""
+    return load_open3d().core.Tensor(view_rays(n_views, image_size, elevation_deg, margin))
+
+
 def face_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """Return (m, 3) float32 unit face normals; degenerate faces get a zero normal."""
     V = np.asarray(V, dtype=np.float64)
@@ -144,15 +152,17 @@ def render_views(
     scene.add_triangles(o3d.core.Tensor(V), o3d.core.Tensor(F.astype(np.uint32)))
 
     size = image_size * supersample
-    rays = view_rays(n_views, size, elevation_deg, margin)
-    hits = scene.cast_rays(o3d.core.Tensor(rays))
-    hit = np.isfinite(hits["t_hit"].numpy())
-    face = hits["primitive_ids"].numpy()
-    normals = face_normals(V, F)
+    rays = _cached_view_rays(n_views, size, float(elevation_deg), float(margin))
+    face = scene.cast_rays(rays)["primitive_ids"].numpy()  # (n_views, size, size) uint32
+    hit = face != scene.INVALID_ID
+    view_of_hit = np.nonzero(hit)[0]
 
+    # the headlight direction is constant per view: |n . d| for every (face, view) pair at once
+    backs = camera_frames(n_views, elevation_deg)[:, 2].astype(np.float32)  # -d per view
+    cosine = np.abs(np.einsum("fi,vi->fv", face_normals(V, F), backs))  # (m, n_views)
+    shade = ambient + diffuse * cosine
     images = np.ones((n_views, size, size), np.float32)
-    cosine = np.abs(np.einsum("ij,ij->i", normals[face[hit]], rays[hit][:, 3:]))
-    images[hit] = ambient + diffuse * cosine
+    images[hit] = shade[face[hit], view_of_hit]
     if supersample > 1:
         images = images.reshape(n_views, image_size, supersample, image_size, supersample).mean(axis=(2, 4))
     return images

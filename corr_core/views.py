@@ -143,5 +143,7 @@ def find_view_files(folder: str | os.PathLike, n_views: int | None = None) -> di
         if extra:
             problems.append(f"item {item} has views {extra} outside 0..{n_views - 1}")
     if problems:
-        raise ValueError(f"incomplete views in {folder} (expected {n_views} per item): " + "; ".join(problems))
+        raise ValueError(
+            f"incomplete views in {folder} (expected {n_views} per item): " + "; ".join(problems)
+        )
     return {item: [views[item][k] for k in range(n_views)] for item in sorted(views)}

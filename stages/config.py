@@ -406,6 +406,7 @@ def _read_stages(raw: dict, pipe: Pipeline, resolver: _Resolver, err) -> dict[st
             if not registry.check_type(v, fn.params[k].annotation):
                 raise err(f"parameter '{k}' = {v!r} has the wrong type; '{fname}' expects "
                           f"{registry.describe_type(fn.params[k].annotation)}", "stages", name, "params", k)
+            params[k] = registry.coerce(v, fn.params[k].annotation)
         tile = st.get("tile", 32)
         if not isinstance(tile, int) or isinstance(tile, bool) or tile < 1:
             raise err("'tile' must be a positive integer", "stages", name, "tile")

@@ -16,9 +16,9 @@ from typing import Any
 PROJECT_PACKAGES = ("corr_core", "stages")
 
 
-def _is_project(obj: Any) -> bool:
+def _is_project(obj: Any, extra: frozenset = frozenset()) -> bool:
     mod = getattr(obj, "__module__", None) if not isinstance(obj, types.ModuleType) else obj.__name__
-    return bool(mod) and mod.split(".")[0] in PROJECT_PACKAGES
+    return bool(mod) and (mod.split(".")[0] in PROJECT_PACKAGES or mod in extra)
 
 
 def _strip_docstrings(tree: ast.AST) -> ast.AST:
@@ -61,20 +61,20 @@ def _referenced_names(tree: ast.AST) -> set[tuple[str, ...]]:
     return chains
 
 
-def _resolve(chain: tuple[str, ...], namespace: dict) -> list[tuple[str, Any]]:
+def _resolve(chain: tuple[str, ...], namespace: dict, extra: frozenset = frozenset()) -> list[tuple[str, Any]]:
     """Project objects reached by a dotted name chain, with their qualified names."""
     if chain[0] not in namespace:
         return []
     obj, found = namespace[chain[0]], []
     for attr in chain[1:] + (None,):
         if isinstance(obj, types.ModuleType):
-            if attr is None or not _is_project(obj):
+            if attr is None or not _is_project(obj, extra):
                 break
             if not hasattr(obj, attr):
                 break
             obj = getattr(obj, attr)
             continue
-        if _is_project(obj) and (inspect.isfunction(obj) or inspect.isclass(obj)):
+        if _is_project(obj, extra) and (inspect.isfunction(obj) or inspect.isclass(obj)):
             found.append((f"{obj.__module__}.{obj.__qualname__}", obj))
         elif isinstance(obj, (int, float, str, bytes, bool, tuple, frozenset, list, dict)) and len(chain) == 1:
             found.append((f"const:{chain[0]}", obj))
@@ -85,11 +85,15 @@ def _resolve(chain: tuple[str, ...], namespace: dict) -> list[tuple[str, Any]]:
 def code_fingerprint(func: Any) -> tuple[str, dict[str, str]]:
     """Fingerprint ``func`` and every project function/class/constant it reaches.
 
+    "Project" means the packages ``corr_core`` and ``stages`` plus the module that defines ``func``
+    (so helpers next to a plugin's stage function are tracked too).
+
     Returns:
         digest: one hex string over everything reached.
         parts: {qualified name: hex digest} of each reached project object (for "why will this rerun").
     """
     func = inspect.unwrap(func)
+    extra = frozenset({func.__module__})
     parts: dict[str, str] = {}
     stack: list[tuple[str, Any]] = [(f"{func.__module__}.{func.__qualname__}", func)]
     while stack:
@@ -107,7 +111,7 @@ def code_fingerprint(func: Any) -> tuple[str, dict[str, str]]:
         if inspect.isfunction(obj) and obj.__closure__:
             namespace.update(zip(obj.__code__.co_freevars, (c.cell_contents for c in obj.__closure__)))
         for chain in _referenced_names(tree):
-            for name, target in _resolve(chain, namespace):
+            for name, target in _resolve(chain, namespace, extra):
                 if name.startswith("const:"):
                     name = f"const:{getattr(inspect.getmodule(obj), '__name__', '?')}.{chain[0]}"
                 stack.append((name, target))

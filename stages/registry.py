@@ -150,6 +150,18 @@ def check_type(value: Any, annotation: Any) -> bool:
     return True
 
 
+def coerce(value: Any, annotation: Any) -> Any:
+    """Canonical form of a valid param value: an int given for a float-only annotation becomes a float,
+    so ``sigma=1`` and ``sigma: 1.0`` give the same cache key."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        return value
+    options = typing.get_args(annotation) if typing.get_origin(annotation) in (typing.Union, types.UnionType) \
+        else (annotation,)
+    if float in options and int not in options:
+        return float(value)
+    return value
+
+
 def describe_type(annotation: Any) -> str:
     """A short human name for an annotation."""
     if annotation is Any:

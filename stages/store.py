@@ -188,12 +188,16 @@ class Store:
         atomic_write_text(self.manifest_path(key), json.dumps(manifest, default=_json_default))
         return manifest
 
-    @staticmethod
-    def _move_into_place(src: str, dst: str) -> None:
+    def _move_into_place(self, src: str, dst: str) -> None:
+        """Rename ``src`` to ``dst``, first moving aside any stale ``dst`` (from an invalidated entry)."""
         os.makedirs(os.path.dirname(dst), exist_ok=True)
         if os.path.exists(dst):
-            # same key = same content: an earlier or concurrent writer got there first
-            shutil.rmtree(dst, ignore_errors=True) if not _looks_complete(dst) else None
+            trash = os.path.join(self.root, "tmp", "trash-" + uuid.uuid4().hex)
+            try:
+                os.rename(dst, trash)
+                shutil.rmtree(trash, ignore_errors=True)
+            except OSError:
+                pass
         try:
             os.rename(src, dst)
         except OSError:
@@ -252,10 +256,6 @@ class Store:
         self.invalidate(key)
         shutil.rmtree(self.object_path(key), ignore_errors=True)
         shutil.rmtree(self.files_path(key), ignore_errors=True)
-
-
-def _looks_complete(path: str) -> bool:
-    return os.path.isdir(path) and bool(os.listdir(path))
 
 
 def _fill_value(dtype: np.dtype):

@@ -113,6 +113,8 @@ def test_lh_is_local_max_and_not_worse_than_icm_from_its_start(seed):
     assert res.energy >= energy(pw, U, icm(pw, U, start)) - 1e-12
     assert res.energy <= e_opt + 1e-12
     assert res.upper_bound >= e_opt - 1e-12
+    # simplex_value is an expectation of E over independent labels, so it cannot exceed the optimum
+    assert res.simplex_value <= e_opt + 1e-12
 
 
 @pytest.mark.parametrize("seed", range(20))

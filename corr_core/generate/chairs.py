@@ -248,7 +248,7 @@ def make_chair(rng: np.random.Generator, kind: str | None = None) -> tuple[np.nd
 
     # arms: a horizontal rest on two supports (or one front support if the back is tall)
     if has_arms:
-        arm_h = min(rng.uniform(0.18, 0.26), 0.8 * back_h)
+        arm_h = min(rng.uniform(0.18, 0.26), 0.65 * back_h)
         arm_w = rng.uniform(0.04, 0.07)
         arm_len = D * rng.uniform(0.75, 0.95)
         for sx in (-1, 1):
@@ -298,8 +298,8 @@ def write_chair_collection(out_dir: str | os.PathLike, n: int = 24, seed: int = 
 
     Chair i is ``canonical_chair(seed, i)`` rotated by ``Ry(azimuth_steps[i] * 2*pi/views)``; the steps are
     uniform on 0..views-1, drawn from ``np.random.default_rng([seed, 0])``.
-    Returns: {"out_dir", "files": [paths], "names": ["001", ...], "azimuth_steps": (n,) int,
-    "azimuth_deg": (n,) float, "views": views, "ground_truth": path of the csv}.
+    Returns (JSON-serialisable): {"out_dir", "files": [paths], "names": ["001", ...], "azimuth_steps": [n ints],
+    "azimuth_deg": [n floats], "views": views, "ground_truth": path of the csv}.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -319,5 +319,5 @@ def write_chair_collection(out_dir: str | os.PathLike, n: int = 24, seed: int = 
         w.writerow(["shape", "azimuth_steps", "azimuth_deg"])
         for name, st, d in zip(names, steps, deg):
             w.writerow([name, int(st), f"{d:g}"])
-    return {"out_dir": str(out), "files": files, "names": names, "azimuth_steps": steps, "azimuth_deg": deg,
-            "views": views, "ground_truth": str(gt)}
+    return {"out_dir": str(out), "files": files, "names": names, "azimuth_steps": [int(v) for v in steps],
+            "azimuth_deg": [float(v) for v in deg], "views": views, "ground_truth": str(gt)}

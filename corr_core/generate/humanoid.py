@@ -4,11 +4,12 @@ Frame of the rest pose: y up (feet at y ~ 0, head top at y ~ 1.76, units ~ metre
 person's LEFT side is +x (names "Left ..." are at x > 0). Rest pose: standing, arms 35 degrees below horizontal.
 
 Construction: a skeleton of joints; the surface is the zero level set of a smooth union (polynomial smooth-min)
-of round cones / ellipsoids, sampled on a grid that is exactly mirror-symmetric in x and meshed with
-``skimage.measure.marching_cubes``; the largest component is kept and vertices are relaxed tangentially and
-projected back onto the implicit surface (better triangles). Poses use linear blend skinning with weights
-diffused over the surface from a nearest-bone labelling, so every pose has the same vertices and faces and
-vertex i matches vertex i (near-isometric; stretch only near joints).
+of round cones / ellipsoids. The x >= 0 half is meshed with ``skimage.measure.marching_cubes`` (its flat cap on
+the midplane is cut off) and glued to its mirror image, so the mesh is exactly left/right symmetric in vertices
+and connectivity; vertices are then relaxed tangentially and projected back onto the implicit surface (better
+triangles; mirror pairs kept exact). Poses use linear blend skinning with weights diffused over the surface from a
+nearest-bone labelling, so every pose has the same vertices and faces and vertex i matches vertex i
+(near-isometric; stretch only near joints).
 """
 from __future__ import annotations
 
@@ -154,11 +155,13 @@ def _largest_component(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.nda
     return V[keepV], new_id[keepF]
 
 
-def _project_to_surface(P: np.ndarray, iters: int = 3, eps: float = 1e-5) -> np.ndarray:
-    """Newton-project points P: (n,3) onto the zero set of ``body_sdf`` (central-difference gradient)."""
+def _project_to_surface(P: np.ndarray, iters: int = 2, eps: float = 1e-5) -> np.ndarray:
+    """Newton-project points P: (n,3) onto the zero set of ``body_sdf`` (forward-difference gradient)."""
+    n = len(P)
     for _ in range(iters):
-        f = body_sdf(P)
-        g = np.stack([(body_sdf(P + eps * e) - body_sdf(P - eps * e)) / (2 * eps) for e in np.eye(3)], 1)
+        vals = body_sdf(np.concatenate([P, P + [eps, 0, 0], P + [0, eps, 0], P + [0, 0, eps]])).reshape(4, n)
+        f = vals[0]
+        g = (vals[1:] - f).T / eps
         P = P - (f / np.maximum((g * g).sum(1), 1e-12))[:, None] * g
     return P
 
@@ -260,12 +263,12 @@ def _segment_distance(P: np.ndarray, a, b) -> np.ndarray:
     return _round_cone(P, a, b, 0.0, 0.0)
 
 
-def skinning_weights(V: np.ndarray, F: np.ndarray, smooth_iters: int = 30) -> tuple[np.ndarray, list[str]]:
+def skinning_weights(V: np.ndarray, F: np.ndarray, smooth_iters: int = 60) -> tuple[np.ndarray, list[str]]:
     """Smooth LBS weights. Returns W: (n, B) rows summing to 1 and the B bone names.
 
     Each vertex is first assigned to the bone with the smallest radius-normalised distance; the one-hot labels are
     then diffused along the surface (``smooth_iters`` lazy random-walk steps), which blends near the joints
-    without leaking across gaps in space (e.g. between the legs).
+    without leaking across gaps in space (e.g. between the legs); weights below 1e-3 are dropped.
     """
     J = skeleton()
     bones = _bones(J)
@@ -277,6 +280,7 @@ def skinning_weights(V: np.ndarray, F: np.ndarray, smooth_iters: int = 30) -> tu
     P = sp.diags(1.0 / np.asarray(A.sum(1)).ravel()) @ A
     for _ in range(smooth_iters):
         W = 0.5 * W + 0.5 * (P @ W)
+    W[W < 1e-3] = 0.0  # diffusion leaves tiny weights everywhere; drop them so bones far from a joint stay rigid
     return W / W.sum(1, keepdims=True), [b[0] for b in bones]
 
 
@@ -408,8 +412,8 @@ def write_humanoid_dataset(out_dir: str | os.PathLike, n_poses: int = 6, seed: i
     (NNN = 001..n_poses, random poses drawn from ``np.random.default_rng(seed)``), ``landmark_vids.txt`` and
     ``sparse_landmark_vids.txt`` (``vid,Name`` lines, 0-based). All meshes share faces; vertex i matches vertex i.
 
-    Returns: {"out_dir", "template", "tests": [paths], "landmarks": {name: vid}, "sparse_landmarks": {name: vid},
-    "n_vertices", "n_faces", "poses": [dict of joint angles in degrees]}.
+    Returns (JSON-serialisable): {"out_dir", "template", "tests": [paths], "landmarks": {name: vid},
+    "sparse_landmarks": {name: vid}, "n_vertices", "n_faces", "poses": [dict of joint angles in degrees]}.
     """
     out = Path(out_dir)
     (out / "meshes" / "template").mkdir(parents=True, exist_ok=True)
@@ -426,4 +430,5 @@ def write_humanoid_dataset(out_dir: str | os.PathLike, n_poses: int = 6, seed: i
     sparse = {n: lms[n] for n in SPARSE_LANDMARK_NAMES}
     (out / "sparse_landmark_vids.txt").write_text("".join(f"{v},{n}\n" for n, v in sparse.items()))
     return {"out_dir": str(out), "template": str(template), "tests": tests, "landmarks": lms,
-            "sparse_landmarks": sparse, "n_vertices": len(V), "n_faces": len(F), "poses": params}
+            "sparse_landmarks": sparse, "n_vertices": int(len(V)), "n_faces": int(len(F)),
+            "poses": [{k: float(v) for k, v in p.items()} for p in params]}
