@@ -159,7 +159,7 @@ def mobius_derivative_abs(coeffs: np.ndarray, z: np.ndarray) -> np.ndarray:
     c = np.asarray(coeffs, dtype=complex)[..., None, :]
     det = c[..., 0] * c[..., 3] - c[..., 1] * c[..., 2]
     with np.errstate(divide="ignore"):
-        return np.abs(det) / np.abs(c[..., 2] * np.asarray(z)[None, :] + c[..., 3]) ** 2
+        return np.abs(det) / np.abs(c[..., 2] * np.asarray(z) + c[..., 3]) ** 2
 
 
 def _distances(A: np.ndarray, B: np.ndarray, metric: str, LA: np.ndarray | None = None,
@@ -363,7 +363,7 @@ def fit_mobius(z: np.ndarray, w: np.ndarray, refine: bool = True) -> np.ndarray:
     coeffs = np.conj(np.linalg.svd(A, full_matrices=False)[2][-1])
     if refine:
         def residual(x):
-            r = apply_mobius(x[:4] + 1j * x[4:], z)[0] - w
+            r = apply_mobius(x[:4] + 1j * x[4:], z) - w
             return np.r_[r.real, r.imag]
         x = least_squares(residual, np.r_[coeffs.real, coeffs.imag], method="lm").x
         coeffs = x[:4] + 1j * x[4:]

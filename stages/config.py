@@ -284,6 +284,10 @@ def _read_generated(raw: dict, err) -> dict[str, GeneratedSpec]:
                       fix=_suggest(gen, registry.names("generator")))
         params = dict(spec.get("params") or {})
         _check_params(registry.get(gen), params, err, ("generated", name, "params"))
+        for k, v in params.items():
+            if not registry.check_type(v, registry.get(gen).params[k].annotation):
+                raise err(f"parameter '{k}' = {v!r} has the wrong type", "generated", name, "params", k)
+            params[k] = registry.coerce(v, registry.get(gen).params[k].annotation)
         out[name] = GeneratedSpec(name, gen, _fill_defaults(registry.get(gen), params))
     return out
 
@@ -310,8 +314,9 @@ def _read_datasets(raw: dict, resolver: _Resolver, err) -> dict[str, DatasetSpec
             gen = m.group(1)
         pattern = spec.get("pattern")
         if kind == "groups":
-            if not pattern or "(?P<item>" not in pattern or "(?P<index>" not in pattern:
-                raise err("a 'groups' dataset needs 'pattern:' with (?P<item>...) and (?P<index>...) groups",
+            if not pattern or "(?P<item>" not in pattern:
+                raise err("a 'groups' dataset needs 'pattern:' with an (?P<item>...) group and usually an "
+                          "(?P<index>...) group (files without an index form a group of one)",
                           "datasets", name, fix=r"pattern: '(?P<item>\d+)_(?P<index>\d+)\.png'")
             try:
                 re.compile(pattern)

@@ -268,13 +268,18 @@ def _dataset_source(pipe: Pipeline, ds: DatasetSpec, hasher: FileHasher) -> Sour
         for p in files:
             m = rx.fullmatch(os.path.basename(p))
             if m:
-                idx = m.group("index")
-                groups.setdefault(m.group("item"), {})[int(idx) if idx.isdigit() else idx] = os.path.abspath(p)
-        counts = {len(g) for g in groups.values()}
+                idx = m.groupdict().get("index")
+                idx = 0 if idx is None else int(idx) if idx.isdigit() else idx
+                group = groups.setdefault(m.group("item"), {})
+                if idx in group:
+                    raise _dataset_error(pipe, ds, f"item '{m.group('item')}' has two files for part {idx}: "
+                                         f"{group[idx]} and {p}", "keep one of them")
+                group[idx] = os.path.abspath(p)
+        counts = [len(g) for g in groups.values()]
         expected = max(counts) if counts else 0
         for name in sorted(groups):
             g = groups[name]
-            if all(isinstance(k, int) for k in g) and expected and sorted(g) != list(range(expected)):
+            if all(isinstance(k, int) for k in g) and expected > 1 and sorted(g) != list(range(expected)):
                 missing = sorted(set(range(expected)) - set(g))
                 raise _dataset_error(pipe, ds, f"item '{name}' is missing parts {missing} "
                                      f"(other items have {expected}: 0..{expected - 1})",

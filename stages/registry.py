@@ -141,6 +141,8 @@ def check_type(value: Any, annotation: Any) -> bool:
         return isinstance(value, (list, tuple))
     if origin is dict:
         return isinstance(value, dict)
+    if annotation in (list, tuple):
+        return isinstance(value, (list, tuple))
     if annotation is float:
         return isinstance(value, (int, float)) and not isinstance(value, bool)
     if annotation is int:
@@ -153,6 +155,8 @@ def check_type(value: Any, annotation: Any) -> bool:
 def coerce(value: Any, annotation: Any) -> Any:
     """Canonical form of a valid param value: an int given for a float-only annotation becomes a float,
     so ``sigma=1`` and ``sigma: 1.0`` give the same cache key."""
+    if isinstance(value, tuple):
+        return list(value)
     if isinstance(value, bool) or not isinstance(value, int):
         return value
     options = typing.get_args(annotation) if typing.get_origin(annotation) in (typing.Union, types.UnionType) \

@@ -1,0 +1,358 @@
+"""Stage wiring for problem 1: joint azimuthal alignment of a shape collection.
+
+views (per shape) -> hog (per shape) -> pairs (per tile of shape pairs: C_ij(theta)) -> solve (MRF)
+-> evaluate (metrics) / export (aligned OBJs, views, alignment.csv, zips) / figures.
+The algorithms live in corr_core; these functions only load, call and store.
+"""
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+import zipfile
+
+import numpy as np
+
+from corr_core import azimuth, circular, mrf, sync
+from corr_core.hog import draw_hog, hog_features
+from corr_core.meshio import MeshError, load_mesh, normalize_mesh, save_obj
+from corr_core.render import render_views, rotate_about_y
+from corr_core.views import load_view_stack
+
+from ..registry import register
+
+MESH_EXTENSIONS = (".obj", ".off", ".ply")
+
+
+def _input_kind(files: list[str]) -> str:
+    exts = {os.path.splitext(f)[1].lower() for f in files}
+    if len(files) == 1 and exts <= set(MESH_EXTENSIONS):
+        return "mesh"
+    if exts == {".png"}:
+        return "views"
+    raise ValueError(f"cannot tell whether {files[0]} ... is a mesh or a set of view images "
+                     f"(extensions {sorted(exts)}); give one mesh (.obj/.off/.ply) or NNN_V.png views per shape")
+
+
+@register("align.views", fanout="item")
+def views(files, *, n_views: int = 16, image_size: int = 120, elevation_deg: float = 20.0,
+          center: str = "bbox") -> dict:
+    """Views of one shape: render a mesh (normalized: centred, unit radius) or load pre-rendered views.
+
+    files: a list with one mesh path, or the shape's NNN_V.png paths in view order.
+    Returns {"views": (V, S, S) uint8 grayscale (255 = white background), "kind": "mesh"|"views"}.
+    """
+    files = [files] if isinstance(files, str) else list(files)
+    kind = _input_kind(files)
+    if kind == "mesh":
+        V, F = load_mesh(files[0])
+        Vn, _, _ = normalize_mesh(V, center=center)
+        images = render_views(Vn, F, n_views=n_views, image_size=image_size, elevation_deg=elevation_deg)
+    else:
+        if len(files) != n_views:
+            raise ValueError(f"{os.path.dirname(files[0])}: shape has {len(files)} views, expected n_views={n_views}")
+        images = load_view_stack(files, size=image_size)
+    if not np.all(np.isfinite(images)):
+        raise ValueError(f"{files[0]}: views contain NaN values")
+    return {"views": np.clip(np.rint(images * 255.0), 0, 255).astype(np.uint8), "kind": kind}
+
+
+@register("align.hog", fanout="item")
+def hog(views, *, method: str = "dollar") -> np.ndarray:
+    """Per-shape feature: HoG of each view, (V, D) float32 (Dollar-compatible 15x15x36 at 120x120 by default)."""
+    images = views["views"].astype(np.float32) / 255.0
+    return hog_features(images, method=method).astype(np.float32)
+
+
+@register("align.pair_costs", fanout="pair", mirror=circular.mirror_pair_costs)
+def pair_costs(A, B) -> np.ndarray:
+    """C: (a, b, V) float32, C_ij(theta) = sum_v ||F_i[v] - F_j[v+theta]||^2 for a tile of shape pairs."""
+    return circular.pair_costs(A, B)
+
+
+def _sigma(C: np.ndarray, sigma, sigma_scale: float) -> float:
+    base = circular.auto_sigma(C) if sigma in (None, "auto") else float(sigma)
+    return float(base * sigma_scale)
+
+
+def _neighbors(C: np.ndarray, knn: int):
+    return circular.nearest_shapes(C, knn) if knn and knn < len(C) - 1 else None
+
+
+def solve_labels(C: np.ndarray, solver: str, sigma: float, seed: int, knn: int = 0) -> dict:
+    """Labels (N,) for pair costs C (N,N,V) with the chosen solver, plus energy diagnostics."""
+    N, _, V = C.shape
+    neighbors = _neighbors(C, knn)
+    op = circular.CirculantPairwise(C, sigma, neighbors)
+    unary = circular.uniform_unary(N, V, seed)
+    out: dict = {}
+    if solver == "lh":
+        res = mrf.solve_lh(op, unary, compute_bound=False)
+        labels = res.labels
+        out.update(iterations=int(res.iterations), converged=bool(res.converged),
+                   relaxed_value=float(res.relaxed_value), energy_before_climb=float(res.energy_before_climb))
+    elif solver == "spectral":
+        labels = sync.spectral_sync(C, sigma, neighbors)
+    elif solver == "ppm":
+        labels, _ = sync.projected_power(C, sigma, neighbors=neighbors)
+    else:
+        raise ValueError(f"unknown solver '{solver}' (use lh, spectral or ppm)")
+    labels = np.asarray(labels, dtype=np.int64)
+    out.update(labels=labels, energy=float(mrf.energy(op, unary, labels)))
+    return out
+
+
+@register("align.solve", fanout="once")
+def solve(costs, *, solver: str = "lh", sigma: float | str = "auto", sigma_scale: float = 1.0, seed: int = 0,
+          knn: int = 0) -> dict:
+    """Joint alignment: MRF over shapes with V labels (rotation offsets), W_ij = exp(-D_ij / sigma).
+
+    costs: {"names": N names, "matrix": (N, N, V) C}. solver: "lh" (Leordeanu & Hebert + climbing),
+    "spectral" (angular synchronization), "ppm" (projected power). sigma: "auto" = median over pairs of
+    min_theta C_ij, times sigma_scale. knn > 0 keeps only each shape's k nearest shapes in the graph.
+    Returns {"names", "labels" (N,) int, "sigma", "energy", "solver", ...}.
+    """
+    C = np.asarray(costs["matrix"], dtype=np.float64)
+    if not np.all(np.isfinite(C)):
+        raise ValueError("pair costs contain NaN: a shape's features are broken")
+    s = _sigma(C, sigma, sigma_scale)
+    out = solve_labels(C, solver, s, seed, knn)
+    out.update(names=list(costs["names"]), sigma=s, solver=solver, seed=seed, n_views=int(C.shape[2]))
+    return out
+
+
+def _read_ground_truth(path) -> dict[str, int] | None:
+    if not path or not os.path.isfile(path):
+        return None
+    with open(path, encoding="utf-8") as fh:
+        return {row["shape"]: int(row["azimuth_steps"]) for row in csv.DictReader(fh)}
+
+
+def shift_costs(C: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+    """Pair costs after cyclically shifting shape i's views by shifts[i] (as if rotated by +shifts[i] steps):
+    C'_ij(theta) = C_ij(theta + s_i - s_j)."""
+    N, _, V = C.shape
+    idx = (np.arange(V)[None, None, :] + shifts[:, None, None] - shifts[None, :, None]) % V
+    return np.take_along_axis(C, idx, axis=2)
+
+
+@register("align.evaluate", fanout="once")
+def evaluate(costs, solution, ground_truth=None, other=None, *, seeds: list = (0, 1, 2, 3, 4),
+             shift_seed: int = 123, restarts: int = 20, compare_solvers: bool = True) -> dict:
+    """Metrics of an alignment run (all agreements are up to one global offset).
+
+    - labels {name: view index} and angle_deg;
+    - seed_stability: agreement of the labelings from several unary seeds with the first;
+    - equivariance: shift each shape's views by known random offsets, solve again, fraction whose label moved
+      by exactly that offset;
+    - solver quality: energies of LH, ICM from random starts, best of random restarts, the peers, and an
+      upper bound;
+    - ground truth (generated data): fraction exact and within one view;
+    - mode agreement with another run's solution (e.g. meshes vs pre-rendered views) on common shapes.
+    """
+    C = np.asarray(costs["matrix"], dtype=np.float64)
+    names = list(solution["names"])
+    labels = np.asarray(solution["labels"])
+    N, _, V = C.shape
+    sigma, solver, knn = float(solution["sigma"]), solution["solver"], 0
+    m: dict = {"n_shapes": N, "n_views": V, "solver": solver, "sigma": sigma,
+               "labels": {n: int(l) for n, l in zip(names, labels)},
+               "angle_deg": {n: float(l * 360.0 / V) for n, l in zip(names, labels)}}
+    # seed stability
+    runs = [labels] + [solve_labels(C, solver, sigma, int(s))["labels"] for s in seeds if int(s) != solution["seed"]]
+    agree = [azimuth.agreement_up_to_offset(r, labels, V)[0] for r in runs[1:]]
+    m["seed_stability"] = {"min": float(min(agree)) if agree else 1.0,
+                           "mean": float(np.mean(agree)) if agree else 1.0, "n_seeds": len(runs)}
+    # equivariance
+    shifts = np.random.default_rng(shift_seed).integers(0, V, N)
+    shifted = solve_labels(shift_costs(C, shifts), solver, sigma, int(solution["seed"]))["labels"]
+    m["equivariance"] = float(azimuth.agreement_up_to_offset(shifted, (labels + shifts) % V, V)[0])
+    # solver quality on the same unary terms
+    op = circular.CirculantPairwise(C, sigma)
+    unary = circular.uniform_unary(N, V, int(solution["seed"]))
+    rng = np.random.default_rng(shift_seed)
+    icm_energies = [mrf.energy(op, unary, mrf.icm(op, unary, mrf.random_labels(N, V, rng))) for _ in range(5)]
+    best_labels, best_e = mrf.best_of_random_restarts(op, unary, restarts, seed=shift_seed)
+    quality = {"energy": float(mrf.energy(op, unary, labels)), "icm_random_start_mean": float(np.mean(icm_energies)),
+               "best_of_random_restarts": float(best_e), "upper_bound": float(mrf.upper_bound(op, unary)),
+               "random_labeling": float(mrf.energy(op, unary, mrf.random_labels(N, V, rng)))}
+    if compare_solvers:
+        for peer in ("lh", "spectral", "ppm"):
+            peer_labels = labels if peer == solver else solve_labels(C, peer, sigma, int(solution["seed"]))["labels"]
+            quality[f"energy_{peer}"] = float(mrf.energy(op, unary, peer_labels))
+            if peer != solver:
+                m.setdefault("agreement_with", {})[peer] = float(azimuth.agreement_up_to_offset(peer_labels, labels, V)[0])
+    m["solver_quality"] = quality
+    gt = _read_ground_truth(ground_truth)
+    if gt:
+        common = [i for i, n in enumerate(names) if n in gt]
+        truth = np.array([gt[names[i]] for i in common])
+        est = labels[common]
+        m["ground_truth"] = {"exact": float(azimuth.agreement_up_to_offset(est, truth, V, tolerance=0)[0]),
+                             "within_one_view": float(azimuth.agreement_up_to_offset(est, truth, V, tolerance=1)[0]),
+                             "n": len(common)}
+        if compare_solvers:
+            for peer in ("lh", "spectral", "ppm"):
+                pl = solve_labels(C, peer, sigma, int(solution["seed"]))["labels"][common]
+                m["ground_truth"][f"exact_{peer}"] = float(azimuth.agreement_up_to_offset(pl, truth, V)[0])
+    if other is not None:
+        other_map = dict(zip(other["names"], np.asarray(other["labels"])))
+        common = [i for i, n in enumerate(names) if n in other_map]
+        if common:
+            a = labels[common]
+            b = np.array([other_map[names[i]] for i in common])
+            m["mode_agreement"] = {"exact": float(azimuth.agreement_up_to_offset(a, b, V)[0]),
+                                   "within_one_view": float(azimuth.agreement_up_to_offset(a, b, V, tolerance=1)[0]),
+                                   "n": len(common)}
+    return m
+
+
+def _aligned_view_index(label: int, V: int, k: int = 0) -> int:
+    return int((k + label) % V)
+
+
+@register("align.export", fanout="once", writes_files=True)
+def export(shapes, solution, *, center: str = "bbox", out_dir: str) -> dict:
+    """Aligned outputs: alignment.csv (shape, label, angle_deg); for meshes the aligned normalized OBJs and
+    aligned_meshes.zip; for pre-rendered views each shape's optimally aligned view and aligned_views.zip."""
+    names, labels = list(solution["names"]), np.asarray(solution["labels"])
+    V = int(solution["n_views"])
+    with open(os.path.join(out_dir, "alignment.csv"), "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(["shape", "label", "angle_deg"])
+        for n, l in zip(names, labels):
+            w.writerow([n, int(l), f"{l * 360.0 / V:.2f}"])
+    written = {"meshes": 0, "views": 0}
+    mesh_dir, view_dir = os.path.join(out_dir, "aligned_meshes"), os.path.join(out_dir, "aligned_views")
+    for n, l in zip(names, labels):
+        files = shapes[n] if not isinstance(shapes[n], str) else [shapes[n]]
+        if _input_kind(files) == "mesh":
+            Vx, F = load_mesh(files[0])
+            Vn, _, _ = normalize_mesh(Vx, center=center)
+            os.makedirs(mesh_dir, exist_ok=True)
+            save_obj(os.path.join(mesh_dir, f"{n}.obj"), rotate_about_y(Vn, -2 * np.pi * int(l) / V), F)
+            written["meshes"] += 1
+        else:
+            os.makedirs(view_dir, exist_ok=True)
+            src = files[_aligned_view_index(int(l), V)]
+            shutil.copyfile(src, os.path.join(view_dir, f"{n}.png"))
+            written["views"] += 1
+    for folder, zname in ((mesh_dir, "aligned_meshes.zip"), (view_dir, "aligned_views.zip")):
+        if os.path.isdir(folder):
+            with zipfile.ZipFile(os.path.join(out_dir, zname), "w", zipfile.ZIP_DEFLATED) as z:
+                for fn in sorted(os.listdir(folder)):
+                    z.write(os.path.join(folder, fn), arcname=os.path.join(os.path.basename(folder), fn))
+    return written
+
+
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _pick(names: list[str], wanted: list[str], k: int) -> list[str]:
+    chosen = [n for n in wanted if n in names]
+    return chosen if len(chosen) >= min(k, len(names)) else sorted(names)[:k]
+
+
+@register("align.figures", fanout="once", writes_files=True)
+def figures(views, features, costs, solution, *, shapes: list = ("001", "002", "003"),
+            grid: list = ("001", "002", "003", "004", "005", "006", "007", "008", "009"),
+            hog_views: list = (0, 4, 8), out_dir: str) -> dict:
+    """Figures: HoG drawings of 3 views of 3 shapes, the D_ij heat map of the first two shapes, their best
+    and worst view pairs, and a 3x3 grid of aligned shapes."""
+    plt = _plt()
+    names = list(solution["names"])
+    labels = dict(zip(names, np.asarray(solution["labels"])))
+    V = int(solution["n_views"])
+    three = _pick(names, list(shapes), 3)
+    made = []
+    # HoG drawings
+    fig, axes = plt.subplots(len(three), 2 * len(hog_views), figsize=(2.0 * 2 * len(hog_views), 2.1 * len(three)))
+    axes = np.atleast_2d(axes)
+    for r, n in enumerate(three):
+        for c, k in enumerate(hog_views):
+            img = views[n]["views"][k % V]
+            H = features[n][k % V]
+            side = int(round(np.sqrt(H.size / 36)))
+            cells = H.reshape(side, side, 36) if side * side * 36 == H.size else None
+            axes[r, 2 * c].imshow(img, cmap="gray", vmin=0, vmax=255)
+            axes[r, 2 * c].set_title(f"{n} view {k % V}", fontsize=8)
+            if cells is not None:
+                axes[r, 2 * c + 1].imshow(draw_hog(cells), cmap="gray")
+                axes[r, 2 * c + 1].set_title("HoG", fontsize=8)
+    for ax in axes.ravel():
+        ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(os.path.join(out_dir, "hog_drawings.png"), dpi=90)
+    plt.close(fig)
+    made.append("hog_drawings.png")
+    # D_ij heat map
+    a, b = three[0], three[1] if len(three) > 1 else three[0]
+    ia, ib = costs["names"].index(a), costs["names"].index(b)
+    C = np.asarray(costs["matrix"])[ia, ib]
+    t = np.arange(V)
+    D = C[(t[None, :] - t[:, None]) % V]
+    fig, ax = plt.subplots(figsize=(5, 4.3))
+    im = ax.imshow(D, cmap="viridis")
+    ax.set_xlabel(f"label t2 of {b}")
+    ax.set_ylabel(f"label t1 of {a}")
+    ax.set_title(f"D_ij(t1,t2) = C_ij(t2-t1), {a} vs {b}")
+    fig.colorbar(im, ax=ax)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out_dir, "dij_heatmap.png"), dpi=90)
+    plt.close(fig)
+    made.append("dij_heatmap.png")
+    # best and worst view pairs (per-view HoG distance)
+    Fa, Fb = np.asarray(features[a], np.float64), np.asarray(features[b], np.float64)
+    d = (Fa ** 2).sum(1)[:, None] + (Fb ** 2).sum(1)[None, :] - 2 * Fa @ Fb.T
+    best, worst = np.unravel_index(np.argmin(d), d.shape), np.unravel_index(np.argmax(d), d.shape)
+    fig, axes = plt.subplots(2, 2, figsize=(5, 5))
+    for r, (pair, title) in enumerate(((best, "best"), (worst, "worst"))):
+        axes[r, 0].imshow(views[a]["views"][pair[0]], cmap="gray", vmin=0, vmax=255)
+        axes[r, 0].set_title(f"{title}: {a} view {pair[0]}", fontsize=8)
+        axes[r, 1].imshow(views[b]["views"][pair[1]], cmap="gray", vmin=0, vmax=255)
+        axes[r, 1].set_title(f"{b} view {pair[1]} (d={d[pair]:.1f})", fontsize=8)
+    for ax in axes.ravel():
+        ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(os.path.join(out_dir, "view_pairs_best_worst.png"), dpi=90)
+    plt.close(fig)
+    made.append("view_pairs_best_worst.png")
+    # 3x3 grid of aligned shapes (aligned view 0 = original view label)
+    nine = _pick(names, list(grid), 9)
+    fig, axes = plt.subplots(3, 3, figsize=(6, 6))
+    for ax, n in zip(axes.ravel(), nine):
+        k = _aligned_view_index(int(labels[n]), V)
+        ax.imshow(views[n]["views"][k], cmap="gray", vmin=0, vmax=255)
+        ax.set_title(f"{n}: label {int(labels[n])}", fontsize=8)
+    for ax in axes.ravel():
+        ax.axis("off")
+    fig.suptitle("aligned shapes (common view 0)")
+    fig.tight_layout()
+    fig.savefig(os.path.join(out_dir, "aligned_grid.png"), dpi=90)
+    plt.close(fig)
+    made.append("aligned_grid.png")
+    return {"figures": made}
+
+
+@register("align.contact_sheet", fanout="once", writes_files=True)
+def contact_sheet(views, solution, *, columns: int = 10, out_dir: str) -> dict:
+    """All shapes' aligned view 0 in one image (to check an alignment by eye)."""
+    plt = _plt()
+    names = list(solution["names"])
+    labels = np.asarray(solution["labels"])
+    V = int(solution["n_views"])
+    rows = int(np.ceil(len(names) / columns))
+    fig, axes = plt.subplots(rows, columns, figsize=(1.2 * columns, 1.3 * rows), squeeze=False)
+    for ax in axes.ravel():
+        ax.axis("off")
+    for ax, n, l in zip(axes.ravel(), names, labels):
+        ax.imshow(views[n]["views"][_aligned_view_index(int(l), V)], cmap="gray", vmin=0, vmax=255)
+        ax.set_title(n, fontsize=6)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out_dir, "all_aligned.png"), dpi=80)
+    plt.close(fig)
+    return {"figures": ["all_aligned.png"]}
