@@ -86,8 +86,10 @@ def plot_error_curves(curves: dict, path, title: str = "Geodesic error (Kim et a
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 4.2))
-    for label, (thr, frac) in curves.items():
-        ax.plot(thr, 100 * np.asarray(frac), label=label, lw=1.8)
+    colors = plt.get_cmap("tab10" if len(curves) <= 10 else "tab20")
+    for c, (label, (thr, frac)) in enumerate(curves.items()):
+        ax.plot(thr, 100 * np.asarray(frac), label=label, lw=1.8, color=colors(c % colors.N),
+                ls="-" if c < 10 else "--")
     ax.set_xlabel("geodesic error / sqrt(area)")
     ax.set_ylabel("% correspondences")
     ax.set_ylim(0, 100)

@@ -204,7 +204,7 @@ def triplet_pairs(n_source: int, n_target: int) -> tuple[np.ndarray, np.ndarray]
 
 def score_maps(ms: np.ndarray, mt: np.ndarray, Zs_samples: np.ndarray, Zt_samples: np.ndarray, K: float = 0.3,
                metric: str = "plane", lam_s: np.ndarray | None = None, lam_t: np.ndarray | None = None,
-               chunk: int = 256) -> np.ndarray:
+               K_scale: float | None = None, chunk: int = 256) -> np.ndarray:
     """Score Möbius map pairs by the fraction of source samples mutually closest to a target sample within K.
 
     Args:
@@ -212,6 +212,8 @@ def score_maps(ms: np.ndarray, mt: np.ndarray, Zs_samples: np.ndarray, Zt_sample
         Zs_samples: (p,) complex, Zt_samples: (q,) complex flattened samples.
         metric: "plane", "sphere" or "surface" (needs lam_s, lam_t: (p,), (q,) planar length per unit of K
             at each sample, e.g. ``midedge_conformal_factor`` times the unit length on the surface).
+        K_scale: with metric "surface", a pair also needs ``|log(local scale ratio)| < K_scale``: the two
+            points must be stretched alike by their flattenings + frames (an isometry keeps them equal).
     Returns:
         (T,) float in [0, 1], the fraction (over min(p, q) samples).
     """
@@ -223,14 +225,18 @@ def score_maps(ms: np.ndarray, mt: np.ndarray, Zs_samples: np.ndarray, Zt_sample
         D = _distances(A, B, metric, LA, LB)
         mutual, j = _batch_mutual(D)
         d = np.take_along_axis(D, j[:, :, None], axis=2)[:, :, 0]
-        out[s:s + chunk] = (mutual & (d < K)).sum(axis=1) / denom
+        good = mutual & (d < K)
+        if K_scale is not None and LA is not None:
+            good &= np.abs(np.log(LA / np.take_along_axis(LB, j, axis=1))) < K_scale
+        out[s:s + chunk] = good.sum(axis=1) / denom
     return out
 
 
 def mobius_vote_landmarks(Zs_samples: np.ndarray, Zt_samples: np.ndarray, Zs_landmarks: np.ndarray,
                           Zt_landmarks: np.ndarray, K: float = 0.3, metric: str = "plane",
                           n_best: int = 20, lam_samples: tuple | None = None,
-                          lam_landmarks: tuple | None = None, power: float = 1.0) -> dict:
+                          lam_landmarks: tuple | None = None, power: float = 1.0,
+                          K_scale: float | None = None) -> dict:
     """Möbius voting over all landmark triplet pairs.
 
     Every 3-subset of source landmarks is paired with every ordered triple of target landmarks; each pair
@@ -247,6 +253,7 @@ def mobius_vote_landmarks(Zs_samples: np.ndarray, Zt_samples: np.ndarray, Zs_lan
         lam_samples: (lam_s (p,), lam_t (q,)) local scales for metric "surface" (see ``score_maps``).
         lam_landmarks: (lam_s (k,), lam_t (k2,)) local scales at the landmarks, for metric "surface".
         power: a map votes with weight ``score ** power`` (larger: only the best maps matter).
+        K_scale: see ``score_maps`` (metric "surface" only).
     Returns:
         dict with ``pred`` (k,) int (target landmark for each source landmark, -1 if k > k2 and unmatched),
         ``votes`` (k, k2) float, ``best_maps`` list of dicts (score, ms, mt, src triplet, tgt triplet,
@@ -258,7 +265,7 @@ def mobius_vote_landmarks(Zs_samples: np.ndarray, Zt_samples: np.ndarray, Zs_lan
     ms = mobius_to_canonical(Zs_landmarks[src])
     mt = mobius_to_canonical(Zt_landmarks[tgt])
     ls, lt = lam_samples if lam_samples is not None else (None, None)
-    scores = score_maps(ms, mt, Zs_samples, Zt_samples, K=K, metric=metric, lam_s=ls, lam_t=lt)
+    scores = score_maps(ms, mt, Zs_samples, Zt_samples, K=K, metric=metric, lam_s=ls, lam_t=lt, K_scale=K_scale)
 
     ls, lt = lam_landmarks if lam_landmarks is not None else (None, None)
     A, LA = _map_points(ms, Zs_landmarks, ls)

@@ -399,7 +399,7 @@ def _read_stages(raw: dict, pipe: Pipeline, resolver: _Resolver, err) -> dict[st
         if fanout == "pair":
             inputs = {"A": InputRef(over), "B": InputRef(over)}
         for arg in fn.inputs:
-            if arg not in inputs:
+            if arg not in inputs and arg not in fn.optional_inputs:
                 raise err(f"input '{arg}' of function '{fname}' is not wired", "stages", name, "inputs",
                           fix=f"add 'inputs: {{{arg}: <dataset or stage>}}'")
         params = resolver.resolve(st.get("params") or {}, ("stages", name, "params"))

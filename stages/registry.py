@@ -5,7 +5,8 @@ module listed in the ``STAGES_PLUGINS`` environment variable): it cannot run arb
 
 A registered function declares its interface through its signature:
 
-* positional (or positional-or-keyword, no default) arguments are **inputs** wired in the YAML ``inputs:``;
+* positional (or positional-or-keyword) arguments are **inputs** wired in the YAML ``inputs:``; those with a
+  default (``ground_truth=None``) are optional and may be left unwired;
 * keyword-only arguments are **params**; their defaults and annotations give types for validation;
 * the keyword-only names ``item_name`` (the item being processed) and ``out_dir`` (a folder for files the
   stage publishes, for ``writes_files=True``) are supplied by the engine.
@@ -49,6 +50,7 @@ class StageFunction:
     params: dict[str, ParamSpec]
     engine_args: tuple[str, ...]
     mirror: Callable | None = None
+    optional_inputs: tuple[str, ...] = ()
     writes_files: bool = False
     kind: str = "stage"  # "stage" or "generator"
     doc: str = field(default="")
@@ -79,7 +81,7 @@ def register(name: str, fanout: str = "once", mirror: Callable | None = None, wr
             hints = typing.get_type_hints(func)
         except Exception:  # unresolvable annotations: validate by default value only
             hints = {}
-        inputs, params, engine = [], {}, []
+        inputs, params, engine, optional = [], {}, [], []
         for p in sig.parameters.values():
             if p.name in ENGINE_ARGS:
                 engine.append(p.name)
@@ -87,6 +89,8 @@ def register(name: str, fanout: str = "once", mirror: Callable | None = None, wr
                 params[p.name] = ParamSpec(p.name, p.default, hints.get(p.name, Any))
             elif p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD):
                 inputs.append(p.name)
+                if p.default is not p.empty:
+                    optional.append(p.name)
             else:
                 raise TypeError(f"{name}: *args/**kwargs are not allowed in registered functions")
         if fanout == "pair" and inputs != ["A", "B"]:
@@ -96,7 +100,7 @@ def register(name: str, fanout: str = "once", mirror: Callable | None = None, wr
         if name in _REGISTRY and _REGISTRY[name].func.__qualname__ != func.__qualname__:
             raise ValueError(f"function name {name!r} registered twice")
         _REGISTRY[name] = StageFunction(name, func, fanout, tuple(inputs), params, tuple(engine), mirror,
-                                        writes_files, kind, inspect.getdoc(func) or "")
+                                        tuple(optional), writes_files, kind, inspect.getdoc(func) or "")
         func.__stage_name__ = name
         return func
 

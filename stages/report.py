@@ -325,7 +325,7 @@ def _figure_html(ctx: dict, rel: str) -> str:
     if cap_rel in ctx["caption_files"]:
         with open(os.path.join(out_dir, cap_rel), encoding="utf-8", errors="replace") as fh:
             caption += f"<pre>{esc(fh.read().strip())}</pre>"
-    title = os.path.splitext(os.path.basename(rel))[0].replace("_", " ")
+    title = os.path.splitext(rel.split("/", 1)[-1])[0].replace("_", " ")   # path inside the stage folder
     return (f'<figure><img src="{_data_uri(os.path.join(out_dir, rel))}" alt="{esc(title)}" title="{esc(rel)}">'
             f"<figcaption><b>{esc(title)}</b> {caption}</figcaption></figure>")
 
@@ -339,7 +339,8 @@ def _figures_block(ctx: dict, stage_names: list[str], extra_groups: list[str] = 
             continue
         if group in plan.stages:
             sp = plan.stages[group]
-            label = f"{group} ({sp.spec.function}, per {sp.spec.fanout})"
+            fanout = {"item": "per item", "pair": "per pair tile"}.get(sp.spec.fanout, "once")
+            label = f"{group} ({sp.spec.function}, {fanout})"
         else:
             label = "pipeline folder (sweep and summary figures)" if group == "" else f"{group} (not a stage)"
         parts.append(f'<h3 id="fig-{_anchor(group or "top")}">{esc(label)}: {len(figs)} figure(s)</h3>')

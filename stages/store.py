@@ -2,7 +2,7 @@
 
 Layout under the cache root::
 
-    objects/ab/<key>.zarr/     zarr group: one array per ndarray in the value
+    objects/ab/<key>.zarr/     one zarr v3 array (<name>.zarr) per ndarray in the value
     objects/ab/<key>.files/    files a stage published (for writes_files stages)
     manifest/ab/<key>.json     written last, atomically: the entry is complete iff this exists
     runs/<pipeline-id>.json    the last run of each pipeline (keys, reasons, timings)
@@ -147,6 +147,7 @@ class Store:
 
     def invalidate(self, key: str) -> None:
         """Forget an entry (its manifest), so the next run recomputes it."""
+        _READ_CACHE.drop(key)
         try:
             os.remove(self.manifest_path(key))
         except FileNotFoundError:
@@ -165,15 +166,17 @@ class Store:
         tree = _encode(value, arrays)
         checksums = {}
         if arrays:
-            tmp = os.path.join(self.tmp_dir(), "data.zarr")
-            group = zarr.open_group(store=zarr.storage.LocalStore(tmp), mode="w")
+            tmp = os.path.join(self.tmp_dir(), "data")
+            os.makedirs(tmp)
             for name, arr in arrays.items():
                 arr = np.ascontiguousarray(arr)
-                chunks = _chunks_for(arr)
-                z = group.create_array(name, shape=arr.shape, chunks=chunks, dtype=arr.dtype,
-                                       fill_value=_fill_value(arr.dtype))
+                store = zarr.storage.LocalStore(os.path.join(tmp, name + ".zarr"))
                 if arr.size:
-                    z[...] = arr
+                    zarr.create_array(store=store, data=arr, chunks=_chunks_for(arr),
+                                      fill_value=_fill_value(arr.dtype))
+                else:
+                    zarr.create_array(store=store, shape=arr.shape, dtype=arr.dtype,
+                                      chunks=tuple(max(1, c) for c in arr.shape), fill_value=_fill_value(arr.dtype))
                 checksums[name] = {"sha": array_checksum(arr), "shape": list(arr.shape), "dtype": str(arr.dtype)}
             self._move_into_place(tmp, self.object_path(key))
         files = {}
@@ -203,7 +206,7 @@ class Store:
         except OSError:
             if not os.path.exists(dst):
                 raise
-        shutil.rmtree(os.path.dirname(src) if src.endswith("data.zarr") else src, ignore_errors=True)
+        shutil.rmtree(os.path.dirname(src) if os.path.basename(src) == "data" else src, ignore_errors=True)
 
     # read --------------------------------------------------------------------------------------
     def get(self, key: str, verify: bool = True) -> Any:
@@ -214,24 +217,25 @@ class Store:
         """
         import zarr
 
+        cached = _READ_CACHE.get(key)
+        if cached is not None:
+            return _copy_arrays(cached)
         manifest = self.manifest(key)
         if manifest is None:
             raise CorruptEntry(key, "manifest missing or unreadable")
         arrays = {}
-        if manifest["arrays"]:
+        for name, meta in manifest["arrays"].items():
             try:
-                group = zarr.open_group(store=zarr.storage.LocalStore(self.object_path(key)), mode="r")
-                for name, meta in manifest["arrays"].items():
-                    arr = group[name][...]
-                    arr = np.asarray(arr)
-                    if verify and array_checksum(arr) != meta["sha"]:
-                        raise CorruptEntry(key, f"array {name} does not match its checksum")
-                    arrays[name] = arr
-            except CorruptEntry:
-                raise
+                arr = np.asarray(zarr.open_array(store=zarr.storage.LocalStore(
+                    os.path.join(self.object_path(key), name + ".zarr"), read_only=True), mode="r")[...])
             except Exception as exc:  # missing chunk files, bad metadata, decompression errors
-                raise CorruptEntry(key, f"{type(exc).__name__}: {exc}") from exc
-        return _decode(manifest["tree"], arrays)
+                raise CorruptEntry(key, f"array {name}: {type(exc).__name__}: {exc}") from exc
+            if list(arr.shape) != meta["shape"] or (verify and array_checksum(arr) != meta["sha"]):
+                raise CorruptEntry(key, f"array {name} does not match its checksum")
+            arrays[name] = arr
+        value = _decode(manifest["tree"], arrays)
+        _READ_CACHE.put(key, value, sum(a.nbytes for a in arrays.values()))
+        return _copy_arrays(value)
 
     def verify_files(self, key: str) -> dict[str, str]:
         """{relative path: absolute path} of the entry's files, each checked against its checksum."""
@@ -256,6 +260,55 @@ class Store:
         self.invalidate(key)
         shutil.rmtree(self.object_path(key), ignore_errors=True)
         shutil.rmtree(self.files_path(key), ignore_errors=True)
+
+
+class _LRU:
+    """Per-process cache of decoded entries (content-addressed, so never stale), bounded in bytes.
+
+    Pair tiles read the same per-item entries many times on one worker; this avoids re-reading them.
+    Size: STAGES_READ_CACHE_MB (default 1024).
+    """
+
+    def __init__(self):
+        from collections import OrderedDict
+        self.items: "OrderedDict[str, tuple[Any, int]]" = OrderedDict()
+        self.bytes = 0
+        self.limit = int(os.environ.get("STAGES_READ_CACHE_MB", "1024")) * 2**20
+
+    def get(self, key: str):
+        hit = self.items.get(key)
+        if hit is None:
+            return None
+        self.items.move_to_end(key)
+        return hit[0]
+
+    def put(self, key: str, value: Any, nbytes: int) -> None:
+        if nbytes > self.limit // 4:
+            return
+        self.items[key] = (value, nbytes)
+        self.bytes += nbytes
+        while self.bytes > self.limit and self.items:
+            _, (_, b) = self.items.popitem(last=False)
+            self.bytes -= b
+
+    def drop(self, key: str) -> None:
+        hit = self.items.pop(key, None)
+        if hit is not None:
+            self.bytes -= hit[1]
+
+
+_READ_CACHE = _LRU()
+
+
+def _copy_arrays(value: Any) -> Any:
+    """A copy of the array leaves (callers may modify what they get), sharing nothing mutable."""
+    if isinstance(value, np.ndarray):
+        return value.copy()
+    if isinstance(value, dict):
+        return {k: _copy_arrays(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_copy_arrays(v) for v in value]
+    return value
 
 
 def _fill_value(dtype: np.dtype):

@@ -7,12 +7,8 @@ import base64
 import importlib
 import math
 import os
-import struct
 import sys
-import textwrap
-import zlib
 from html.parser import HTMLParser
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -285,7 +281,7 @@ def test_report_before_any_run_and_cli(project, tmp_path):
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == str(tmp_path / "r.html")
     doc = parse(str(tmp_path / "r.html"))
-    assert len(doc.images) == 3 + 2 * 6          # align: 2 PNG; corr: PNG + SVG per item; earlier report ignored
+    assert len(doc.images) == 2 + 2 * 6          # align: 2 PNG; corr: PNG + SVG per item; earlier report ignored
     assert "Nothing has been run yet" not in "".join(doc.text)
     assert all(link.startswith(("data:", "#")) for link in doc.links)
 

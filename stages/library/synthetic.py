@@ -42,12 +42,13 @@ def _mirror_distances(block: np.ndarray) -> np.ndarray:
 
 
 @register("synthetic.pair_distances", fanout="pair", mirror=_mirror_distances)
-def pair_distances(A, B, *, work: int = 0) -> np.ndarray:
-    """(a, b) squared distances between stacks A (a,8,d) and B (b,8,d); ``work`` ms per pair added."""
+def pair_distances(A, B, *, work_us: int = 0) -> np.ndarray:
+    """(a, b) squared distances between stacks A (a,8,d) and B (b,8,d); ``work_us`` microseconds of compute
+    added per pair."""
     A2 = A.reshape(len(A), -1)
     B2 = B.reshape(len(B), -1)
     D = (A2 ** 2).sum(1)[:, None] + (B2 ** 2).sum(1)[None, :] - 2 * A2 @ B2.T
-    _spin(work * len(A) * len(B) / 1000.0)
+    _spin(work_us * len(A) * len(B) / 1000.0)
     return D.astype(np.float32)
 
 
