@@ -217,9 +217,10 @@ class Store:
         """
         import zarr
 
+        signature = _files_signature(self.object_path(key))
         cached = _READ_CACHE.get(key)
-        if cached is not None:
-            return _copy_arrays(cached)
+        if cached is not None and cached[1] == signature:
+            return _copy_arrays(cached[0])
         manifest = self.manifest(key)
         if manifest is None:
             raise CorruptEntry(key, "manifest missing or unreadable")
@@ -234,7 +235,7 @@ class Store:
                 raise CorruptEntry(key, f"array {name} does not match its checksum")
             arrays[name] = arr
         value = _decode(manifest["tree"], arrays)
-        _READ_CACHE.put(key, value, sum(a.nbytes for a in arrays.values()))
+        _READ_CACHE.put(key, (value, signature), sum(a.nbytes for a in arrays.values()))
         return _copy_arrays(value)
 
     def verify_files(self, key: str) -> dict[str, str]:
@@ -260,6 +261,17 @@ class Store:
         self.invalidate(key)
         shutil.rmtree(self.object_path(key), ignore_errors=True)
         shutil.rmtree(self.files_path(key), ignore_errors=True)
+
+
+def _files_signature(path: str) -> tuple:
+    """(relative path, size, mtime_ns) of every file under ``path``: a cached read is reused only while the
+    files on disk are untouched (so a corrupted or replaced chunk is read, and caught, again)."""
+    sig = []
+    for dirpath, _, files in os.walk(path):
+        for f in files:
+            st = os.stat(os.path.join(dirpath, f))
+            sig.append((os.path.join(dirpath, f), st.st_size, st.st_mtime_ns))
+    return tuple(sorted(sig))
 
 
 class _LRU:
