@@ -170,13 +170,25 @@ def save_obj(path: str | os.PathLike, V: np.ndarray, F: np.ndarray) -> None:
         fh.write("".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in F))
 
 
-def normalize_mesh(V: np.ndarray, center: str = "bbox") -> tuple[np.ndarray, np.ndarray, float]:
+def surface_centroid(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """(3,) area-weighted centroid of the triangles: independent of tessellation and of rotations."""
+    T = V[F]
+    area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
+    if area.sum() <= 0:
+        return V.mean(axis=0)
+    return (area[:, None] * T.mean(axis=1)).sum(axis=0) / area.sum()
+
+
+def normalize_mesh(V: np.ndarray, center: str = "bbox", F: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, float]:
     """Centre a shape at the origin and scale it to unit radius.
 
     Args:
         V: (n, 3) vertex positions.
-        center: "bbox" (centre of the axis-aligned bounding box, robust to uneven tessellation) or
-            "mean" (vertex centroid).
+        center: "bbox" (centre of the axis-aligned bounding box), "mean" (vertex centroid) or "area"
+            (area-weighted surface centroid, needs ``F``; commutes with rotations and does not depend on the
+            tessellation, so a rotated copy of a shape normalizes to the rotated normalized shape).
+        F: (m, 3) faces, for center="area".
     Returns:
         Vn: (n, 3) normalized positions, max ||Vn_i|| == 1.
         c: (3,) the centre that was subtracted.
@@ -186,8 +198,12 @@ def normalize_mesh(V: np.ndarray, center: str = "bbox") -> tuple[np.ndarray, np.
         c = 0.5 * (V.min(axis=0) + V.max(axis=0))
     elif center == "mean":
         c = V.mean(axis=0)
+    elif center == "area":
+        if F is None:
+            raise ValueError("center='area' needs the faces F")
+        c = surface_centroid(V, F)
     else:
-        raise ValueError(f"center must be 'bbox' or 'mean', got {center!r}")
+        raise ValueError(f"center must be 'bbox', 'mean' or 'area', got {center!r}")
     r = float(np.linalg.norm(V - c, axis=1).max())
     if not np.isfinite(r) or r <= 0:
         raise MeshError("cannot normalize a mesh whose vertices all coincide")

@@ -239,6 +239,11 @@ def mobius_vote_landmarks(Zs_samples: np.ndarray, Zt_samples: np.ndarray, Zs_lan
                           K_scale: float | None = None) -> dict:
     """Möbius voting over all landmark triplet pairs.
 
+    Recommended on SCAPE-like meshes (measured, docs/mobius_notes.md): 300 farthest-point samples,
+    ``metric="surface"`` with ``lam = midedge_conformal_factor * sqrt(area / n_samples)``, ``K=0.5``,
+    ``K_scale=0.3``, ``power=4``; the plain defaults (``metric="plane"``, K=0.3) follow the paper's frame but
+    do not separate good from bad maps there.
+
     Every 3-subset of source landmarks is paired with every ordered triple of target landmarks; each pair
     defines canonical-frame maps ``ms``, ``mt`` (see module docstring) which are scored on the samples and
     vote, weighted by the score, for the landmark pairs mutually closest within ``K``.

@@ -131,7 +131,7 @@ def test_scape_two_meshes_voting():
     (Zs, Es, Ss, ls), (Zt, Et, St, lt) = flat
     es, et = vertex_to_edge(sparse, Es), vertex_to_edge(sparse, Et)
     out = mobius_vote_landmarks(Zs[Ss], Zt[St], Zs[es], Zt[et], K=0.5, metric="surface",
-                                lam_samples=(ls[Ss], lt[St]), lam_landmarks=(ls[es], lt[et]), power=4)
+                                lam_samples=(ls[Ss], lt[St]), lam_landmarks=(ls[es], lt[et]), power=4, K_scale=0.3)
     np.testing.assert_array_equal(out["pred"], np.arange(5))        # ground truth: vertex i <-> vertex i
     ext = extend_landmarks(out["consensus_maps"], Zs[vertex_to_edge(full, Es)], Zt[vertex_to_edge(full, Et)],
                            top=100)

@@ -36,8 +36,9 @@ def _input_kind(files: list[str]) -> str:
 
 @register("align.views", fanout="item")
 def views(files, *, n_views: int = 16, image_size: int = 120, elevation_deg: float = 20.0,
-          center: str = "bbox") -> dict:
-    """Views of one shape: render a mesh (normalized: centred, unit radius) or load pre-rendered views.
+          center: str = "area") -> dict:
+    """Views of one shape: render a mesh (normalized: area centroid at the origin, unit radius) or load
+    pre-rendered views.
 
     files: a list with one mesh path, or the shape's NNN_V.png paths in view order.
     Returns {"views": (V, S, S) uint8 grayscale (255 = white background), "kind": "mesh"|"views"}.
@@ -46,7 +47,7 @@ def views(files, *, n_views: int = 16, image_size: int = 120, elevation_deg: flo
     kind = _input_kind(files)
     if kind == "mesh":
         V, F = load_mesh(files[0])
-        Vn, _, _ = normalize_mesh(V, center=center)
+        Vn, _, _ = normalize_mesh(V, center=center, F=F)
         images = render_views(Vn, F, n_views=n_views, image_size=image_size, elevation_deg=elevation_deg)
     else:
         if len(files) != n_views:
@@ -212,7 +213,7 @@ def _aligned_view_index(label: int, V: int, k: int = 0) -> int:
 
 
 @register("align.export", fanout="once", writes_files=True)
-def export(shapes, solution, *, center: str = "bbox", out_dir: str) -> dict:
+def export(shapes, solution, *, center: str = "area", out_dir: str) -> dict:
     """Aligned outputs: alignment.csv (shape, label, angle_deg); for meshes the aligned normalized OBJs and
     aligned_meshes.zip; for pre-rendered views each shape's optimally aligned view and aligned_views.zip."""
     names, labels = list(solution["names"]), np.asarray(solution["labels"])
@@ -228,7 +229,7 @@ def export(shapes, solution, *, center: str = "bbox", out_dir: str) -> dict:
         files = shapes[n] if not isinstance(shapes[n], str) else [shapes[n]]
         if _input_kind(files) == "mesh":
             Vx, F = load_mesh(files[0])
-            Vn, _, _ = normalize_mesh(Vx, center=center)
+            Vn, _, _ = normalize_mesh(Vx, center=center, F=F)
             os.makedirs(mesh_dir, exist_ok=True)
             save_obj(os.path.join(mesh_dir, f"{n}.obj"), rotate_about_y(Vn, -2 * np.pi * int(l) / V), F)
             written["meshes"] += 1
