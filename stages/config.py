@@ -178,8 +178,8 @@ def load_pipeline(path: str, overrides: list[str] | tuple = (), cache_dir: str |
                     cache_dir=os.path.abspath(cache_dir or raw.get("cache") or "cache"),
                     output_dir=os.path.abspath(output_dir or raw.get("output") or os.path.join("results", name)),
                     params={}, generated={}, datasets={}, stages={}, raw=raw, overrides=list(overrides))
-    pipe.generated = _read_generated(raw, err)
     resolver = _Resolver(raw["params"], pipe, err)
+    pipe.generated = _read_generated(raw, err, resolver)
     pipe.params = resolver.resolve(raw["params"], ("params",))
     pipe.datasets = _read_datasets(raw, resolver, err)
     pipe.stages = _read_stages(raw, pipe, resolver, err)
@@ -272,7 +272,7 @@ class GeneratedPath(str):
         return obj
 
 
-def _read_generated(raw: dict, err) -> dict[str, GeneratedSpec]:
+def _read_generated(raw: dict, err, resolver: "_Resolver") -> dict[str, GeneratedSpec]:
     out = {}
     for name, spec in raw["generated"].items():
         if not isinstance(spec, dict) or "generator" not in spec:
@@ -282,7 +282,7 @@ def _read_generated(raw: dict, err) -> dict[str, GeneratedSpec]:
         if gen not in registry.names("generator"):
             raise err(f"unknown generator '{gen}'", "generated", name, "generator",
                       fix=_suggest(gen, registry.names("generator")))
-        params = dict(spec.get("params") or {})
+        params = resolver.resolve(dict(spec.get("params") or {}), ("generated", name, "params"))
         _check_params(registry.get(gen), params, err, ("generated", name, "params"))
         for k, v in params.items():
             if not registry.check_type(v, registry.get(gen).params[k].annotation):
