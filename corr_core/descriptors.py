@@ -99,10 +99,10 @@ def descriptor_distance(DA: np.ndarray, DB: np.ndarray, metric: str = "relative_
     DB = np.asarray(DB, dtype=np.float64)
     if DA.ndim != 2 or DB.ndim != 2 or DA.shape[1] != DB.shape[1]:
         raise ValueError(f"descriptor shapes do not match: {DA.shape} vs {DB.shape}")
-    diff = DA[:, None, :] - DB[None, :, :]
     if metric == "l2":
         sq = (DA**2).sum(1)[:, None] + (DB**2).sum(1)[None, :] - 2 * DA @ DB.T
         return np.sqrt(np.maximum(sq, 0.0))
+    diff = DA[:, None, :] - DB[None, :, :]  # (a,b,d): fine for landmark sets, O(a b d) memory
     if metric == "l1":
         return np.abs(diff).sum(axis=2)
     if metric == "relative_l1":

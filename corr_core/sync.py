@@ -17,36 +17,64 @@ from __future__ import annotations
 
 import numpy as np
 
-from corr_core.circular import CirculantPairwise, _kernel, _symmetrize_costs, auto_sigma
+from corr_core.circular import CirculantPairwise, _symmetrize_costs, auto_sigma
 
-__all__ = ["sync_matrix", "spectral_sync", "round_phases", "projected_power"]
+__all__ = ["sync_matrix", "spectral_sync", "spectral_sync_operator", "round_phases", "projected_power"]
 
 
 def sync_matrix(C: np.ndarray, sigma: float | None = None, neighbors: np.ndarray | None = None,
                 harmonic: int = 1) -> np.ndarray:
     """H: (N, N) complex128 Hermitian, H_ij = sum_theta exp(-C_ij(theta)/sigma) exp(i 2 pi harmonic theta/V),
-    zero diagonal (and zero off the optional neighbour graph, see CirculantPairwise). sigma=None: auto_sigma."""
+    zero diagonal (and zero off the optional neighbour graph, see CirculantPairwise). sigma=None: auto_sigma.
+    Always a dense ndarray (see ``CirculantPairwise.harmonic`` for the sparse form)."""
     if sigma is None:
         sigma = auto_sigma(C)
-    K = _kernel(C, sigma, neighbors)
-    V = K.shape[2]
-    phase = np.exp(2j * np.pi * harmonic * np.arange(V) / V)
-    return K @ phase
+    H = CirculantPairwise(C, sigma, neighbors).harmonic(harmonic)
+    return H.toarray() if hasattr(H, "toarray") else H
+
+
+# below this many shapes a dense eigensolve (exact, as before); above, Lanczos for the top eigenvector only
+DENSE_EIGH_MAX = 500
+
+
+def _top_eigenvector(H) -> np.ndarray:
+    """Eigenvector of the largest eigenvalue of a Hermitian (N, N) matrix (ndarray or scipy.sparse)."""
+    N = H.shape[0]
+    if N <= DENSE_EIGH_MAX:
+        dense = H.toarray() if hasattr(H, "toarray") else H
+        return np.linalg.eigh(dense)[1][:, -1]
+    from scipy.sparse.linalg import eigsh
+    v0 = np.full(N, 1.0 / np.sqrt(N), dtype=np.complex128)
+    return eigsh(H, k=1, which="LA", v0=v0, tol=1e-10)[1][:, 0]
+
+
+def spectral_sync_operator(op: CirculantPairwise, normalize: bool = True) -> np.ndarray:
+    """Labels (N,) int from a built CirculantPairwise (dense or kNN-sparse): the top eigenvector of its first
+    harmonic H (``op.harmonic(1)``), degree-normalized if ``normalize``. Lets a caller that already holds the
+    operator (e.g. for energies) avoid building the kernel twice."""
+    H = op.harmonic(1)
+    if normalize:
+        deg = np.asarray(abs(H).sum(axis=1)).ravel()
+        s = 1.0 / np.sqrt(np.where(deg > 0, deg, 1.0))
+        if hasattr(H, "toarray"):
+            import scipy.sparse as sp
+            D = sp.diags(s)
+            H = (D @ H @ D).tocsr()
+        else:
+            H *= s[:, None]
+            H *= s[None, :]
+    return round_phases(_top_eigenvector(H), op.n_labels)
 
 
 def spectral_sync(C: np.ndarray, sigma: float | None = None, neighbors: np.ndarray | None = None,
                   normalize: bool = True) -> np.ndarray:
     """Labels (N,) int in 0..V-1 from the top eigenvector of ``sync_matrix`` (Singer 2011), correct up to one
     global offset. normalize=True uses the degree-normalized matrix D^-1/2 H D^-1/2, D_ii = sum_j |H_ij|
-    (Singer & Shkolnisky's variant, less dominated by a few high-degree shapes)."""
-    H = sync_matrix(C, sigma, neighbors)
-    V = np.asarray(C).shape[2]
-    if normalize:
-        deg = np.abs(H).sum(axis=1)
-        s = 1.0 / np.sqrt(np.where(deg > 0, deg, 1.0))
-        H = s[:, None] * H * s[None, :]
-    _, vecs = np.linalg.eigh(H)
-    return round_phases(vecs[:, -1], V)
+    (Singer & Shkolnisky's variant, less dominated by a few high-degree shapes). With ``neighbors`` H is
+    sparse (kNN graph). N > DENSE_EIGH_MAX uses Lanczos (scipy eigsh) instead of a full eigensolve."""
+    if sigma is None:
+        sigma = auto_sigma(C)
+    return spectral_sync_operator(CirculantPairwise(C, sigma, neighbors), normalize)
 
 
 def round_phases(z: np.ndarray, V: int) -> np.ndarray:
@@ -67,16 +95,9 @@ def projected_power(C: np.ndarray, sigma: float | None = None, labels0: np.ndarr
     labels0=None: start from spectral_sync(C, sigma)."""
     if sigma is None:
         sigma = auto_sigma(C)
-    if score == "kernel":
-        S = _kernel(C, sigma, neighbors)
-    elif score == "log":
-        S = -_symmetrize_costs(C) / sigma
-        if neighbors is not None:
-            S = S * (_kernel(C, sigma, neighbors) > 0)
-    else:
+    if score not in ("kernel", "log"):
         raise ValueError(f"score must be 'kernel' or 'log', got {score!r}")
-    S = S - S.mean(axis=2, keepdims=True)
-    op = CirculantPairwise.from_kernel(S)
+    op = _centered_score_operator(C, sigma, score, neighbors)
     N, V = op.n_nodes, op.n_labels
     labels = spectral_sync(C, sigma, neighbors) if labels0 is None else np.asarray(labels0, np.int64) % V
     it = 0
@@ -88,3 +109,28 @@ def projected_power(C: np.ndarray, sigma: float | None = None, labels0: np.ndarr
             break
         labels = new
     return labels, it
+
+
+def _centered_score_operator(C: np.ndarray, sigma: float, score: str, neighbors) -> CirculantPairwise:
+    """Operator of the per-pair scores (kernel exp(-C/sigma) or log -C/sigma), each centred over theta, on
+    the complete graph (dense) or the kNN graph (sparse, same CSR layout as CirculantPairwise)."""
+    base = CirculantPairwise(C, sigma, neighbors)
+    if base.sparse:
+        if score == "kernel":
+            S = base.K_edges.astype(np.float64)
+        else:
+            rows = np.repeat(np.arange(base.n_nodes), np.diff(base.indptr))
+            V = base.n_labels
+            S = -0.5 * (np.asarray(C)[rows, base.indices].astype(np.float64)
+                        + np.asarray(C)[base.indices, rows][:, (-np.arange(V)) % V]) / sigma
+        return CirculantPairwise.from_edges(base.indptr, base.indices, S - S.mean(axis=1, keepdims=True))
+    if score == "kernel":
+        S = base.K
+        S -= S.mean(axis=2, keepdims=True, dtype=np.float64).astype(S.dtype)
+        op = CirculantPairwise.__new__(CirculantPairwise)  # S is a fresh array: wrap it without copying
+        op._init_dense(S)
+        op.sigma = float(sigma)
+        return op
+    del base
+    S = -_symmetrize_costs(C) / sigma
+    return CirculantPairwise.from_kernel(S - S.mean(axis=2, keepdims=True))

@@ -392,6 +392,7 @@ def _read_stages(raw: dict, pipe: Pipeline, resolver: _Resolver, err) -> dict[st
             if arg not in fn.inputs:
                 raise err(f"function '{fname}' has no input '{arg}'", "stages", name, "inputs", arg,
                           fix=f"its inputs: {', '.join(fn.inputs) or '(none)'}")
+            ref = resolver.resolve(ref, ("stages", name, "inputs", arg))
             inputs[arg] = _parse_input(ref, err, ("stages", name, "inputs", arg))
             if inputs[arg].source not in names:
                 raise err(f"unknown dataset or stage '{inputs[arg].source}'", "stages", name, "inputs", arg,
