@@ -91,7 +91,7 @@ def descriptor_distance(DA: np.ndarray, DB: np.ndarray, metric: str = "relative_
         DA: (a,d); DB: (b,d) descriptors of the same kind and scaling.
         metric: "l2" (Euclidean), "l1", or "relative_l1" (sum_j |x_j - y_j| / (x_j + y_j), for positive
             descriptors such as HKS/WKS; insensitive to the very different magnitudes across times; the
-            default, it beat "l2" by 5-15 points of landmark accuracy on SCAPE).
+            default: on SCAPE it beat "l2" by 3-6 points of landmark accuracy for WKS and HKS+WKS, none for HKS).
     Returns:
         (a,b) float, non-negative.
     """
