@@ -124,6 +124,8 @@ def _dispatch(args) -> int:
             print(json.dumps(result, indent=2, default=str))
         else:
             print(runner.format_table(result["rows"]))
+            if result.get("figure"):
+                print(f"figure: {result['figure']}")
         for f in result["failures"]:
             print(f"FAILED {f['stage']}[{f['item']}]: {f['error']}", file=sys.stderr)
         return 1 if result["failures"] else 0

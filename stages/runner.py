@@ -273,7 +273,46 @@ def sweep(path: str, grids: list[str], overrides=(), workers: int = 2, scheduler
               "failures": failures, "time": time.time()}
     sweep_id = pipeline_id(path) + "-" + digest_json([grids, list(overrides)])[:8]
     atomic_write_text(os.path.join(store.root, "sweeps", sweep_id + ".json"), json.dumps(result, default=str))
+    result["figure"] = plot_sweep(rows, os.path.join(plans[0].pipeline.output_dir, "sweeps", sweep_id + ".png"))
     return result
+
+
+def plot_sweep(rows: list[dict], path: str, max_panels: int = 8) -> str | None:
+    """Plot the scalar metrics that vary across a one-axis numeric sweep against the swept value."""
+    axes_keys = list(dict.fromkeys(k for r in rows for k in r["point"]))
+    if len(axes_keys) != 1 or len(rows) < 2:
+        return None
+    key = axes_keys[0]
+    try:
+        xs = [float(r["point"][key]) for r in rows]
+    except ValueError:
+        return None
+    flat = [scalar_metrics(r["metrics"]) for r in rows]
+    names = [n for n in dict.fromkeys(k for f in flat for k in f)
+             if all(isinstance(f.get(n), (int, float)) and not isinstance(f.get(n), bool) for f in flat)
+             and len({f[n] for f in flat}) > 1]
+    preferred = [n for n in names if any(w in n for w in ("energy", "accuracy", "exact", "stability", "equivariance"))]
+    names = (preferred + [n for n in names if n not in preferred])[:max_panels]
+    if not names:
+        return None
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    cols = min(4, len(names))
+    nrows = (len(names) + cols - 1) // cols
+    fig, axs = plt.subplots(nrows, cols, figsize=(3.4 * cols, 2.6 * nrows), squeeze=False)
+    order = sorted(range(len(xs)), key=lambda i: xs[i])
+    for ax, n in zip(axs.ravel(), names):
+        ax.plot([xs[i] for i in order], [flat[i][n] for i in order], "o-")
+        ax.set_xlabel(key)
+        ax.set_title(n, fontsize=8)
+    for ax in axs.ravel()[len(names):]:
+        ax.axis("off")
+    fig.tight_layout()
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
 
 
 def scalar_metrics(m: dict, prefix: str = "") -> dict[str, Any]:
