@@ -108,3 +108,81 @@ def test_uniform_unary_is_seeded_and_in_unit_interval():
     assert U.shape == (10, 16) and U.min() >= 0 and U.max() < 1
     np.testing.assert_array_equal(U, uniform_unary(10, 16, seed=3))
     assert not np.array_equal(U, uniform_unary(10, 16, seed=4))
+
+
+# --- memory-lean storage and the sparse kNN operator ---------------------------------------------------------
+
+def _graph_mask(N, nb):
+    mask = np.zeros((N, N), dtype=bool)
+    for i in range(N):
+        for j in nb[i]:
+            mask[i, j] = mask[j, i] = True
+    np.fill_diagonal(mask, False)
+    return mask
+
+
+def test_neighbor_graph_csr_matches_brute_force_union():
+    from corr_core.circular import neighbor_graph
+    C = pair_costs(features(9, 6, 4, 12))
+    nb = nearest_shapes(C, 3)
+    indptr, indices = neighbor_graph(9, nb)
+    mask = _graph_mask(9, nb)
+    for i in range(9):
+        row = indices[indptr[i]:indptr[i + 1]]
+        np.testing.assert_array_equal(row, np.flatnonzero(mask[i]))
+    assert indices.size == mask.sum() <= 2 * 9 * 3
+
+
+@pytest.mark.parametrize("k", [1, 3])
+def test_sparse_operator_equals_dense_operator_restricted_to_knn_graph(k):
+    """The kNN operator (CSR storage) is the complete-graph circulant operator with every pair off the graph
+    zeroed: same matvec, columns, block maxima and harmonic, by brute force over all (j, b)."""
+    N, V = 11, 8
+    C = pair_costs(features(N, V, 5, 13))
+    sigma = auto_sigma(C)
+    nb = nearest_shapes(C, k)
+    sparse = CirculantPairwise(C, sigma, nb)
+    full = CirculantPairwise(C, sigma)
+    assert sparse.sparse and not full.sparse
+    restricted = CirculantPairwise.from_kernel(full.K * _graph_mask(N, nb)[:, :, None])
+    X = np.random.default_rng(14).normal(size=(N, V))
+    np.testing.assert_allclose(sparse.matvec(X), restricted.matvec(X), rtol=1e-12, atol=1e-14)
+    for j, b in itertools.product(range(N), range(V)):
+        np.testing.assert_array_equal(sparse.column(j, b), restricted.column(j, b))
+    np.testing.assert_array_equal(sparse.block_max(), restricted.block_max())
+    np.testing.assert_allclose(np.asarray(sparse.harmonic(1).todense()), restricted.harmonic(1), atol=1e-13)
+    # memory: only the graph's edges are stored (E x V float32), never N x N x V
+    E = _graph_mask(N, nb).sum()
+    assert sparse.K_edges.shape == (E, V) and sparse.K_edges.dtype == np.float32
+    U = uniform_unary(N, V, seed=1)
+    labels = np.random.default_rng(2).integers(0, V, N)
+    assert energy(sparse, U, labels) == pytest.approx(energy(dense_pairwise(C, sigma, nb), U, labels), rel=1e-12)
+
+
+def test_dense_kernel_is_float32_and_exactly_symmetric():
+    N, V = 6, 16
+    C = pair_costs(features(N, V, 7, 15))
+    op = CirculantPairwise(C, auto_sigma(C))
+    K = op.K
+    assert K.dtype == np.float32 and op.nbytes == 4 * N * N * V
+    minus = (-np.arange(V)) % V
+    np.testing.assert_array_equal(K.transpose(1, 0, 2)[:, :, minus], K)  # bitwise: W[i,j,a,b] == W[j,i,b,a]
+    np.testing.assert_array_equal(K[np.arange(N), np.arange(N)], 0.0)
+    # the float32 kernel is the float64 definition rounded
+    Csym = 0.5 * (C.astype(np.float64) + mirror_pair_costs(C.astype(np.float64)))
+    ref = np.exp(-Csym / op.sigma)
+    ref[np.arange(N), np.arange(N)] = 0.0
+    np.testing.assert_allclose(K, ref, rtol=1e-6, atol=1e-30)
+
+
+def test_blocked_matvec_equals_single_gemm(monkeypatch):
+    """Row-blocked float64 accumulation over a float32 kernel == one float64 product of the upcast kernel."""
+    import corr_core.circular as circ
+    N, V = 13, 8
+    C = pair_costs(features(N, V, 5, 16))
+    op = CirculantPairwise(C, auto_sigma(C))
+    X = np.random.default_rng(3).normal(size=(N, V))
+    ref = CirculantPairwise.from_kernel(op.K.astype(np.float64)).matvec(X)
+    monkeypatch.setattr(circ, "_rows_per_block", lambda N, V, budget_bytes=0: 3)
+    np.testing.assert_allclose(op.matvec(X), ref, rtol=1e-13, atol=1e-14)
+    np.testing.assert_allclose(CirculantPairwise(C, op.sigma).K, op.K)  # kernel built in 3-row blocks too

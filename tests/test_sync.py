@@ -135,3 +135,43 @@ def test_course_chairs_equivariance():
     F = _load_chair_features(range(1, 31), V)
     offsets = np.random.default_rng(2024).integers(0, V, size=len(F))
     _check_equivariance(F, offsets, V)
+
+
+# --- kNN graph and large-N paths ------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("seed", range(2))
+def test_spectral_ppm_and_lh_exact_on_knn_graph(seed):
+    from corr_core.circular import nearest_shapes
+    C, offsets = synthetic_costs(N=60, seed=seed, outlier_frac=0.2)
+    sigma = auto_sigma(C)
+    nb = nearest_shapes(C, 8)
+    assert agreement_up_to_offset(spectral_sync(C, sigma, nb), offsets, 16)[0] == 1.0
+    assert agreement_up_to_offset(projected_power(C, sigma, neighbors=nb)[0], offsets, 16)[0] == 1.0
+    op = CirculantPairwise(C, sigma, nb)
+    assert op.sparse
+    res = solve_lh(op, uniform_unary(60, 16, seed), compute_bound=False)
+    assert agreement_up_to_offset(res.labels, offsets, 16)[0] == 1.0
+
+
+def test_sync_matrix_on_knn_graph_is_the_complete_one_restricted():
+    from corr_core.circular import nearest_shapes
+    C, _ = synthetic_costs(N=15, seed=3, outlier_frac=0.3)
+    nb = nearest_shapes(C, 2)
+    mask = np.zeros((15, 15), dtype=bool)
+    mask[np.repeat(np.arange(15), 2), nb.ravel()] = True
+    mask |= mask.T
+    np.testing.assert_allclose(sync_matrix(C, 2.0, nb), sync_matrix(C, 2.0) * mask, atol=1e-13)
+
+
+@pytest.mark.parametrize("use_knn", [False, True])
+def test_lanczos_path_gives_the_dense_eigensolve_labels(monkeypatch, use_knn):
+    """Above DENSE_EIGH_MAX shapes spectral sync uses eigsh for the top eigenvector: same labels as eigh."""
+    import corr_core.sync as sync
+    from corr_core.circular import nearest_shapes
+    C, offsets = synthetic_costs(N=50, seed=5, outlier_frac=0.3)
+    nb = nearest_shapes(C, 6) if use_knn else None
+    dense_labels = spectral_sync(C, None, nb)
+    monkeypatch.setattr(sync, "DENSE_EIGH_MAX", 10)
+    lanczos_labels = spectral_sync(C, None, nb)
+    assert agreement_up_to_offset(lanczos_labels, dense_labels, 16)[0] == 1.0
+    assert agreement_up_to_offset(lanczos_labels, offsets, 16, tolerance=1)[0] >= 0.95
