@@ -3,6 +3,8 @@ then parse the report with html.parser and check figures, metrics, sweeps and pr
 own records."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import base64
 import importlib
 import math
@@ -196,7 +198,9 @@ def test_report_contents(project, tmp_path):
 
     # every image under the output folder is embedded byte-for-byte, in the right section
     images = sorted(p for p in out_dir.rglob("*") if p.suffix in (".png", ".svg"))
-    assert len(images) == 1 + 2 + 2 * 6
+    # 2 stage figures + 2 per item for 6 items + the extra one + the sweep's own plot of metric vs sigma
+    assert len(images) == 1 + 2 + 2 * 6 + 1
+    assert sweep["figure"] and Path(sweep["figure"]).is_file()
     by_title = {im["title"]: im for im in doc.images}
     assert len(doc.images) == len(images)
     for p in images:

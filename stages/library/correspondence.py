@@ -173,6 +173,14 @@ def _z(flat: dict) -> np.ndarray:
     return flat["Z"][:, 0] + 1j * flat["Z"][:, 1]
 
 
+def _same_triangles(F_a: np.ndarray, F_b: np.ndarray) -> bool:
+    """True when F_a: (m,3) and F_b: (m,3) hold the same triangles as vertex sets, in any order."""
+    if F_a.shape != F_b.shape:
+        return False
+    A, B = np.sort(F_a, axis=1), np.sort(F_b, axis=1)
+    return np.array_equal(A[np.lexsort(A.T[::-1])], B[np.lexsort(B.T[::-1])])
+
+
 @register("corr.match_mobius", fanout="item")
 def match_mobius(template, target, template_mesh, target_mesh, landmarks, sparse_landmarks, *, K: float = 0.5,
                  metric: str = "surface", K_scale: float = 0.3, power: float = 4.0, top: int = 100,
@@ -183,7 +191,8 @@ def match_mobius(template, target, template_mesh, target_mesh, landmarks, sparse
     K: deformation-error threshold; with metric "surface" in units of the sample spacing
     sqrt(area / n_samples) (docs/mobius_notes.md), with "plane" in canonical-frame units (the paper).
     Returns {"sparse": (k,), "all": (L,), "dense_errors": (dense_points,) geodesic error / sqrt(area),
-    "best_score": float}.
+    "best_score": float}. The dense errors need the truth "vertex i <-> vertex i", i.e. the same vertex count
+    and faces as the template; otherwise they are left out and "dense_skipped" (str) says why.
     """
     sp = _sparse_index(landmarks, sparse_landmarks, 1 << 40)
     Zs, Zt = _z(template), _z(target)
@@ -202,7 +211,12 @@ def match_mobius(template, target, template_mesh, target_mesh, landmarks, sparse
     out = {"sparse": np.asarray(res["pred"]), "all": np.asarray(pred_all),
            "best_score": float(res["best_maps"][0]["score"])}
     Vt, Ft = target_mesh["V"], target_mesh["F"]
-    if len(Vt) == len(template_mesh["V"]) and dense_points > 0:
+    Vs, Fs = template_mesh["V"], template_mesh["F"]
+    if len(Vt) != len(Vs) or not _same_triangles(Ft, Fs):
+        out["dense_skipped"] = (f"{len(Vt)} vertices and {len(Ft)} faces vs the template's {len(Vs)} and {len(Fs)} "
+                                "(the same connectivity is required): no vertex i <-> vertex i ground truth, "
+                                "dense-map errors skipped")
+    elif dense_points > 0:
         src_vertices = farthest_point_samples(template_mesh["V"], dense_points)
         edges_s, edges_t = template["edges"], target["edges"]
         src_eids = np.array([midedge.vertex_to_edge(int(v), edges_s) for v in src_vertices])
@@ -276,6 +290,9 @@ def evaluate(landmarks, sparse_landmarks, descriptor=None, mrf=None, mrf_oriente
     _plot_accuracy_bars(accuracy, os.path.join(out_dir, "accuracy.png"))
     out = {"accuracy": accuracy, "accuracy_per_mesh": per_mesh, "top_confusions": confusions}
     if mobius_votes:
+        skipped = {m: r["dense_skipped"] for m, r in sorted(mobius_votes.items()) if "dense_skipped" in r}
+        if skipped:
+            out["dense_map_skipped"] = skipped
         errors = np.concatenate([np.asarray(r["dense_errors"]) for r in mobius_votes.values() if "dense_errors" in r]
                                 or [np.zeros(0)])
         if errors.size:
