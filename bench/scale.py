@@ -145,12 +145,12 @@ def synth_features(n: int, V: int = 16, D: int = 128, noise: float = 0.6, seed: 
     return F.astype(np.float32), offsets
 
 
-def _child_mrf(n: int, solver: str, knn: int, tile: int = 500) -> dict:
-    """In a fresh process: build C tile by tile, then the solve stage's work; report times and ru_maxrss."""
+def synth_costs(n: int, path: Path, tile: int = 500) -> dict:
+    """Synthesize C (n, n, V) float32 tile by tile with circular.pair_costs (upper tiles + mirror, like the
+    engine's pair stage) and save it with the planted offsets; returns timing and peak RSS of this process."""
     import resource
 
-    sys.path.insert(0, str(ROOT))
-    from corr_core import azimuth, circular, mrf, sync
+    from corr_core import circular
 
     t0 = time.time()
     F, offsets = synth_features(n)
@@ -161,7 +161,23 @@ def _child_mrf(n: int, solver: str, knn: int, tile: int = 500) -> dict:
             C[a:a + tile, b:b + tile] = block
             if b != a:
                 C[b:b + tile, a:a + tile] = circular.mirror_pair_costs(block)
-    t_pairs = time.time() - t0
+    seconds = time.time() - t0
+    np.save(path, C)
+    np.save(str(path) + ".offsets.npy", offsets)
+    return {"pairs_s": seconds, "C_mb": C.nbytes / 2**20,
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+def _child_mrf(path: str, solver: str, knn: int) -> dict:
+    """In a fresh process: load C (as the solve stage receives it), then the solve stage's work (auto sigma,
+    kNN graph, operator, spectral sync or LH, energy); report times and ru_maxrss (C included)."""
+    import resource
+
+    from corr_core import azimuth, circular, mrf, sync
+
+    C = np.load(path)
+    offsets = np.load(path + ".offsets.npy")
+    n, V = C.shape[0], C.shape[2]
     rss_after_c = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     t0 = time.time()
     sigma = circular.auto_sigma(C)
@@ -169,43 +185,55 @@ def _child_mrf(n: int, solver: str, knn: int, tile: int = 500) -> dict:
     op = circular.CirculantPairwise(C, sigma, neighbors)
     t_op = time.time() - t0
     t0 = time.time()
-    unary = circular.uniform_unary(n, C.shape[2], 0)
+    unary = circular.uniform_unary(n, V, 0)
     if solver == "spectral":
         labels = sync.spectral_sync_operator(op)
     else:
         labels = mrf.solve_lh(op, unary, compute_bound=False).labels
     e = mrf.energy(op, unary, labels)
     t_solve = time.time() - t0
-    exact = azimuth.agreement_up_to_offset(labels, offsets, C.shape[2])[0]
+    exact = azimuth.agreement_up_to_offset(labels, offsets, V)[0]
     return {"n": n, "solver": solver, "knn": knn, "C_mb": C.nbytes / 2**20, "op_mb": op.nbytes / 2**20,
-            "pairs_s": t_pairs, "operator_s": t_op, "solve_s": t_solve, "energy": float(e), "exact": float(exact),
+            "operator_s": t_op, "solve_s": t_solve, "energy": float(e), "exact": float(exact),
             "rss_after_C_mb": rss_after_c, "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
 
-def bench_mrf_memory(n: int, configs: list[tuple[str, int]]) -> list[dict]:
+def _in_child(call: str) -> dict | None:
+    code = f"import json, sys; sys.path.insert(0, {str(ROOT / 'bench')!r}); import scale; print(json.dumps(scale.{call}))"
+    # one BLAS thread, as in the engine's dask workers (distributed sets OMP_NUM_THREADS=1 for them)
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+           "MKL_NUM_THREADS": "1"}
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    if res.returncode != 0:
+        print(res.stderr[-2000:])
+        return None
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def bench_mrf_memory(n: int, configs: list[tuple[str, int]], work: Path) -> dict:
+    path = work / f"C_{n}.npy"
+    synth = _in_child(f"synth_costs({n}, {str(path)!r})")
+    print(f"N={n}: synthesized C {synth['C_mb']:.0f} MB float32 in {synth['pairs_s']:.1f} s "
+          f"(pair_costs, 500-shape tiles, D=128), peak RSS {synth['peak_rss_mb']:.0f} MB", flush=True)
     rows = []
     for solver, knn in configs:
-        code = (f"import json, sys; sys.path.insert(0, {str(ROOT / 'bench')!r}); import scale; "
-                f"print(json.dumps(scale._child_mrf({n}, {solver!r}, {knn})))")
-        res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                             env={**os.environ, "PYTHONPATH": str(ROOT)})
-        if res.returncode != 0:
-            print(res.stderr[-2000:])
+        row = _in_child(f"_child_mrf({str(path)!r}, {solver!r}, {knn})")
+        if row is None:
             continue
-        row = json.loads(res.stdout.strip().splitlines()[-1])
         rows.append(row)
-        print(f"N={n} {solver:>8} knn={knn:>3}: C {row['C_mb']:.0f} MB, operator {row['op_mb']:.0f} MB, "
-              f"pairs {row['pairs_s']:.1f} s, operator {row['operator_s']:.1f} s, solve {row['solve_s']:.1f} s, "
-              f"peak RSS {row['peak_rss_mb']:.0f} MB (after C {row['rss_after_C_mb']:.0f}), exact {row['exact']:.3f}",
-              flush=True)
-    return rows
+        print(f"N={n} {solver:>8} knn={knn:>3}: operator {row['op_mb']:.0f} MB built in {row['operator_s']:.1f} s, "
+              f"solve {row['solve_s']:.1f} s, peak RSS {row['peak_rss_mb']:.0f} MB (C alone {row['rss_after_C_mb']:.0f}), "
+              f"exact {row['exact']:.3f}", flush=True)
+    path.unlink(missing_ok=True)
+    Path(str(path) + ".offsets.npy").unlink(missing_ok=True)
+    return {"synth": synth, "solves": rows}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", type=int, nargs="*", default=[100, 300, 1000])
     ap.add_argument("--n", type=int, default=None, help="MRF-only memory check at this N on a synthesized C")
-    ap.add_argument("--mrf-configs", nargs="*", default=["spectral:0", "spectral:10", "lh:10"],
+    ap.add_argument("--mrf-configs", nargs="*", default=["spectral:0", "lh:0", "spectral:10", "lh:10"],
                     help="solver:knn pairs for --n")
     ap.add_argument("--knn", type=int, default=0, help="also measure kNN accuracy (spectral, LH) at each size")
     ap.add_argument("--knn-only", action="store_true", help="skip the timing runs (reuse their caches)")
@@ -218,7 +246,7 @@ def main() -> None:
     report: dict = {}
     if args.n:
         configs = [(c.split(":")[0], int(c.split(":")[1])) for c in args.mrf_configs]
-        report["mrf_memory"] = bench_mrf_memory(args.n, configs)
+        report["mrf_memory"] = bench_mrf_memory(args.n, configs, work)
     else:
         if not args.knn_only:
             rows = []

@@ -43,6 +43,7 @@ datasets:
   landmarks: {{file: "${{data.root}}/landmark_vids.txt"}}
   sparse_landmarks: {{file: "${{data.root}}/sparse_landmark_vids.txt"}}
   flattened: {{folder: "${{data.root}}/flattened_meshes", optional: true}}
+  uniform_samples: {{file: "${{data.root}}/uniform_sample_vids.txt", optional: true}}
 stages:
   mesh: {{function: corr.mesh, foreach: meshes, inputs: {{path: meshes}}}}
   spectral: {{function: corr.spectral, foreach: mesh, inputs: {{mesh: mesh, landmarks: landmarks}}, params: {{k: 40}}}}
@@ -50,7 +51,7 @@ stages:
   flatten:
     function: corr.flatten
     foreach: mesh
-    inputs: {{mesh: mesh, path: meshes, landmarks: landmarks, flattened: flattened}}
+    inputs: {{mesh: mesh, path: meshes, landmarks: landmarks, flattened: flattened, samples: uniform_samples}}
     params: {{n_samples: 150}}
   descriptor:
     function: corr.match_descriptor

@@ -97,31 +97,45 @@ def _given_flat(folder, item_path: str, n_edges: int):
 
 
 @register("corr.flatten", fanout="item")
-def flatten(mesh, path, landmarks, flattened=None, *, source: str = "compute", n_samples: int = 300) -> dict:
-    """Mid-edge flattening (one complex point per edge) and farthest-point surface samples.
+def flatten(mesh, path, landmarks, flattened=None, samples=None, *, source: str = "compute",
+            sample_source: str = "auto", n_samples: int = 300) -> dict:
+    """Mid-edge flattening (one complex point per edge) and uniform surface samples.
 
-    source: "compute" (the project's flattening, default), "given" (use flattened_meshes/ when present,
-    else compute). Returns {"Z": (E,2) float (x, y), "lam": (E,) local scale of the flattening,
-    "landmark_eids": (L,), "sample_eids": (n_samples,), "edges": (E,2), "area": float, "source": str}.
+    source: "compute" (the project's own flattening, the default: on SCAPE it is more accurate than the course
+    files, which are stored with 6 digits), "given" / "auto" (use the mesh's file in ``flattened`` =
+    flattened_meshes/{template,test}/ when present, else compute it).
+    sample_source: "fps" (farthest-point samples of the edge midpoints), "given" / "auto" (the vertex ids in
+    ``samples``, e.g. uniform_sample_vids.txt, when present, else fps). Note: the course's sample file lists the
+    same vertex ids for every mesh, i.e. samples already in correspondence; "fps" does not use that.
+    Returns {"Z": (E,2) float (x, y), "lam": (E,) local scale of the flattening, "landmark_eids": (L,),
+    "sample_eids": (S,), "edges": (E,2), "area": float, "source": str, "sample_source": str}.
     """
     V, F = mesh["V"], mesh["F"]
+    if source not in ("auto", "compute", "given"):
+        raise ValueError(f"source must be 'auto', 'compute' or 'given', got {source!r}")
+    if sample_source not in ("auto", "fps", "given"):
+        raise ValueError(f"sample_source must be 'auto', 'fps' or 'given', got {sample_source!r}")
     Z, edges, face_edges, kept = midedge.midedge_flatten(V, F)
     used = "computed"
-    if source == "given":
+    if source in ("auto", "given"):
         given = _given_flat(flattened, path, len(edges))
         if given is not None:
             Z, used = given, "given"
-    elif source != "compute":
-        raise ValueError(f"source must be 'compute' or 'given', got {source!r}")
     lam = midedge.midedge_conformal_factor(V, edges, face_edges, kept, Z, F)
-    M = midedge.edge_midpoints(V, edges)
-    start = int(np.argmax(np.linalg.norm(M - M.mean(axis=0), axis=1)))
-    samples = farthest_point_samples(M, n_samples, start=start)
+    sample_used = "fps"
+    if sample_source in ("auto", "given") and samples:
+        svids, _ = read_landmarks(samples, n_vertices=len(V))
+        sample_eids = np.array([midedge.vertex_to_edge(int(v), edges) for v in svids], dtype=np.int64)
+        sample_used = "given"
+    else:
+        M = midedge.edge_midpoints(V, edges)
+        start = int(np.argmax(np.linalg.norm(M - M.mean(axis=0), axis=1)))
+        sample_eids = farthest_point_samples(M, n_samples, start=start)
     ids, _ = _landmarks(landmarks, len(V))
     eids = np.array([midedge.vertex_to_edge(int(v), edges) for v in ids], dtype=np.int64)
     return {"Z": np.stack([Z.real, Z.imag], axis=1), "lam": lam, "landmark_eids": eids,
-            "sample_eids": np.asarray(samples, dtype=np.int64), "edges": edges.astype(np.int64),
-            "area": float(mesh["area"]), "source": used}
+            "sample_eids": np.asarray(sample_eids, dtype=np.int64), "edges": edges.astype(np.int64),
+            "area": float(mesh["area"]), "source": used, "sample_source": sample_used}
 
 
 def _descriptor_matrix(s: dict, kind: str) -> np.ndarray:
