@@ -413,7 +413,7 @@ def _read_stages(raw: dict, pipe: Pipeline, resolver: _Resolver, err) -> dict[st
                 raise err(f"parameter '{k}' = {v!r} has the wrong type; '{fname}' expects "
                           f"{registry.describe_type(fn.params[k].annotation)}", "stages", name, "params", k)
             params[k] = registry.coerce(v, fn.params[k].annotation)
-        tile = st.get("tile", 32)
+        tile = resolver.resolve(st.get("tile", 32), ("stages", name, "tile"))
         if not isinstance(tile, int) or isinstance(tile, bool) or tile < 1:
             raise err("'tile' must be a positive integer", "stages", name, "tile")
         stages[name] = StageSpec(name, fname, fanout, over, inputs, params, tile, bool(st.get("metrics", False)))

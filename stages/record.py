@@ -56,6 +56,19 @@ def _short(v) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
+def _item_suffix(plan: Plan, task: Task, ref) -> str:
+    """'[item]' when the input is one item of a collection, '' when it is a single value or a whole collection."""
+    if ref is None:
+        return ""
+    if ref.item is not None:
+        return f"[{ref.item}]"
+    source = plan.datasets.get(ref.source) or (plan.stages[ref.source].source if ref.source in plan.stages else None)
+    per_item = source is not None and source.kind == "items"
+    if per_item and not ref.whole and plan.stages[task.stage].spec.fanout == "item":
+        return f"[{task.label}]"
+    return ""
+
+
 def reason(task: Task, plan: Plan, record: dict | None) -> str:
     """Why ``task`` (a cache miss) will run, compared with the last recorded run."""
     sp = plan.stages[task.stage]
@@ -100,6 +113,5 @@ def reason(task: Task, plan: Plan, record: dict | None) -> str:
                     bits.append(f"{label} {', '.join(lst[:5])}{' ...' if len(lst) > 5 else ''}")
             why.append(f"input {arg} ({src}): {'; '.join(bits) or 'changed'}")
         else:
-            label = f"[{task.label}]" if task.label and sp.spec.fanout == "item" else ""
-            why.append(f"input {arg} ({src}{label}) changed")
+            why.append(f"input {arg} ({src}{_item_suffix(plan, task, ref)}) changed")
     return "; ".join(why) or "key changed"
