@@ -80,7 +80,7 @@ def make_client(workers: int = 2, scheduler: str | None = None, local_dir: str |
         return Client(scheduler, timeout="30s")
     dask.config.set({"distributed.worker.daemon": True, "distributed.admin.tick.limit": "60s",
                      "distributed.worker.memory.terminate": False})
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
                            local_directory=local_dir, memory_limit=memory_limit, silence_logs=40)
     return Client(cluster)
 
