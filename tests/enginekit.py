@@ -59,3 +59,56 @@ def cli(args: list[str], cwd: Path, env: dict | None = None, timeout: float = 30
 
 def executed(summary: dict) -> dict[str, int]:
     return {name: s["executed"] for name, s in summary["stages"].items()}
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that is free right now."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class ExternalCluster:
+    """A real dask.distributed cluster as separate processes on 127.0.0.1: a scheduler and ``n_workers``
+    single-threaded workers. Use as a context manager; ``.address`` is the scheduler address."""
+
+    def __init__(self, workdir: Path, n_workers: int = 2):
+        self.workdir, self.n_workers = Path(workdir), n_workers
+        self.port = free_port()
+        self.address = f"tcp://127.0.0.1:{self.port}"
+        self.env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+        self.procs: list[subprocess.Popen] = []
+
+    def __enter__(self) -> "ExternalCluster":
+        import time
+
+        quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+        self.procs.append(subprocess.Popen(
+            [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", str(self.port),
+             "--dashboard-address", ":0", "--no-show"], env=self.env, cwd=self.workdir, **quiet))
+        for i in range(self.n_workers):
+            self.procs.append(subprocess.Popen(
+                [sys.executable, "-m", "distributed.cli.dask_worker", self.address, "--nthreads", "1",
+                 "--nworkers", "1", "--local-directory", str(self.workdir / f"w{i}"), "--name", f"w{i}",
+                 "--no-dashboard"], env=self.env, cwd=self.workdir, **quiet))
+        from distributed import Client
+
+        deadline = time.time() + 90
+        while True:  # the scheduler needs a moment to listen
+            try:
+                with Client(self.address, timeout="5s") as c:
+                    c.wait_for_workers(self.n_workers, timeout=60)
+                return self
+            except OSError:
+                if time.time() > deadline:
+                    self.__exit__(None, None, None)
+                    raise
+                time.sleep(0.5)
+
+    def __exit__(self, *exc) -> None:
+        for p in self.procs[::-1]:
+            p.terminate()
+        for p in self.procs:
+            p.wait(timeout=30)

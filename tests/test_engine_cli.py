@@ -4,7 +4,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -15,7 +14,7 @@ import pytest
 
 from stages import runner
 
-from enginekit import ROOT, SYNTHETIC_YAML, cli, make_project
+from enginekit import ROOT, SYNTHETIC_YAML, ExternalCluster, cli, make_project
 
 
 def _summary(path: Path) -> dict:
@@ -158,39 +157,11 @@ def test_code_change_reruns_only_dependent_stages(tmp_path):
     assert ex == {"feat": 0, "dist": 0, "summary": 0, "rep": 0, "doubled": 8, "total": 1}
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_pipeline_on_an_external_dask_cluster(tmp_path):
     make_project(tmp_path, n=10)
-    port = _free_port()
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    dask_bin = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
-    procs = [subprocess.Popen(dask_bin + ["--host", "127.0.0.1", "--port", str(port), "--dashboard-address", ":0",
-                                          "--no-show"], env=env, cwd=tmp_path,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
-    try:
-        time.sleep(2)
-        for i in range(2):
-            procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker",
-                                           f"tcp://127.0.0.1:{port}", "--nthreads", "1", "--nworkers", "1",
-                                           "--local-directory", str(tmp_path / f"w{i}"), "--name", f"w{i}",
-                                           "--no-dashboard"], env=env, cwd=tmp_path,
-                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        from distributed import Client
-        with Client(f"tcp://127.0.0.1:{port}", timeout="30s") as c:
-            c.wait_for_workers(2, timeout=60)
-        res = cli(["run", "p.yaml", "--scheduler", f"tcp://127.0.0.1:{port}", "--summary-json", "s.json"],
-                  cwd=tmp_path)
+    with ExternalCluster(tmp_path, n_workers=2) as cluster:
+        res = cli(["run", "p.yaml", "--scheduler", cluster.address, "--summary-json", "s.json"], cwd=tmp_path)
         assert res.returncode == 0, res.stderr
         assert _executed(_summary(tmp_path / "s.json"))["feat"] == 10
         manifests = [json.loads(p.read_text()) for p in (tmp_path / "cache" / "manifest").rglob("*.json")]
         assert len({m["info"]["pid"] for m in manifests}) == 2  # both external workers did work
-    finally:
-        for p in procs[::-1]:
-            p.terminate()
-        for p in procs:
-            p.wait(timeout=30)

@@ -4,20 +4,14 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 import subprocess
 import sys
-import time
 from pathlib import Path
+
+from enginekit import ExternalCluster
 
 ROOT = Path(__file__).resolve().parents[1]
 PIPELINE = ROOT / "pipelines" / "scale.yaml"
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _stages(args: list[str], cwd: Path, env: dict) -> subprocess.CompletedProcess:
@@ -26,32 +20,11 @@ def _stages(args: list[str], cwd: Path, env: dict) -> subprocess.CompletedProces
 
 
 def test_scale_pipeline_on_an_external_dask_cluster(tmp_path):
-    port = _free_port()
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     cache, out = tmp_path / "cache", tmp_path / "out"
     common = ["--set", "n=12", "--cache", str(cache)]
-    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
-                               "--port", str(port), "--dashboard-address", ":0", "--no-show"],
-                              env=env, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
-    try:
-        for i in range(2):
-            procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker",
-                                           f"tcp://127.0.0.1:{port}", "--nthreads", "1", "--nworkers", "1",
-                                           "--local-directory", str(tmp_path / f"w{i}"), "--name", f"w{i}",
-                                           "--no-dashboard"], env=env, cwd=tmp_path,
-                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        from distributed import Client
-        deadline = time.time() + 60
-        while True:  # the scheduler may need a moment to listen
-            try:
-                with Client(f"tcp://127.0.0.1:{port}", timeout="5s") as c:
-                    c.wait_for_workers(2, timeout=60)
-                break
-            except OSError:
-                if time.time() > deadline:
-                    raise
-                time.sleep(0.5)
-        res = _stages(["run", str(PIPELINE), *common, "--out", str(out), "--scheduler", f"tcp://127.0.0.1:{port}",
+    with ExternalCluster(tmp_path, n_workers=2) as cluster:
+        res = _stages(["run", str(PIPELINE), *common, "--out", str(out), "--scheduler", cluster.address,
                        "--summary-json", str(tmp_path / "s.json")], ROOT, env)
         assert res.returncode == 0, res.stderr
         stages = json.loads((tmp_path / "s.json").read_text())["stages"]
@@ -65,8 +38,3 @@ def test_scale_pipeline_on_an_external_dask_cluster(tmp_path):
         m = json.loads(res.stdout)
         assert m["ground_truth"]["n"] == 12 and m["ground_truth"]["exact"] == 1.0
         assert m["n_shapes"] == 12
-    finally:
-        for p in procs[::-1]:
-            p.terminate()
-        for p in procs:
-            p.wait(timeout=30)
