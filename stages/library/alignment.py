@@ -260,84 +260,96 @@ def _pick(names: list[str], wanted: list[str], k: int) -> list[str]:
     return chosen if len(chosen) >= min(k, len(names)) else sorted(names)[:k]
 
 
-@register("align.figures", fanout="once", writes_files=True)
-def figures(views, features, costs, solution, *, shapes: list = ("001", "002", "003"),
-            grid: list = ("001", "002", "003", "004", "005", "006", "007", "008", "009"),
-            hog_views: list = (0, 4, 8), out_dir: str) -> dict:
-    """Figures: HoG drawings of 3 views of 3 shapes, the D_ij heat map of the first two shapes, their best
-    and worst view pairs, and a 3x3 grid of aligned shapes."""
+def _save(fig, out_dir: str, name: str) -> str:
+    """Save and close a matplotlib figure as ``out_dir/name``; returns ``name``."""
     plt = _plt()
-    names = list(solution["names"])
-    labels = dict(zip(names, np.asarray(solution["labels"])))
-    V = int(solution["n_views"])
-    three = _pick(names, list(shapes), 3)
-    made = []
-    # HoG drawings
-    fig, axes = plt.subplots(len(three), 2 * len(hog_views), figsize=(2.0 * 2 * len(hog_views), 2.1 * len(three)))
+    fig.tight_layout()
+    fig.savefig(os.path.join(out_dir, name), dpi=90)
+    plt.close(fig)
+    return name
+
+
+def _hog_cells(H: np.ndarray):
+    """(h, w, 36) cells of a flattened Dollar HoG vector, or None for other layouts."""
+    side = int(round(np.sqrt(H.size / 36)))
+    return H.reshape(side, side, 36) if side * side * 36 == H.size else None
+
+
+def _figure_hog(views, features, shapes: list[str], view_ids: list[int], V: int, out_dir: str) -> str:
+    """Each shape's chosen views next to their HoG glyph drawings."""
+    plt = _plt()
+    fig, axes = plt.subplots(len(shapes), 2 * len(view_ids), figsize=(4.0 * len(view_ids), 2.1 * len(shapes)))
     axes = np.atleast_2d(axes)
-    for r, n in enumerate(three):
-        for c, k in enumerate(hog_views):
-            img = views[n]["views"][k % V]
-            H = features[n][k % V]
-            side = int(round(np.sqrt(H.size / 36)))
-            cells = H.reshape(side, side, 36) if side * side * 36 == H.size else None
-            axes[r, 2 * c].imshow(img, cmap="gray", vmin=0, vmax=255)
+    for r, n in enumerate(shapes):
+        for c, k in enumerate(view_ids):
+            axes[r, 2 * c].imshow(views[n]["views"][k % V], cmap="gray", vmin=0, vmax=255)
             axes[r, 2 * c].set_title(f"{n} view {k % V}", fontsize=8)
+            cells = _hog_cells(np.asarray(features[n][k % V]))
             if cells is not None:
                 axes[r, 2 * c + 1].imshow(draw_hog(cells), cmap="gray")
                 axes[r, 2 * c + 1].set_title("HoG", fontsize=8)
     for ax in axes.ravel():
         ax.axis("off")
-    fig.tight_layout()
-    fig.savefig(os.path.join(out_dir, "hog_drawings.png"), dpi=90)
-    plt.close(fig)
-    made.append("hog_drawings.png")
-    # D_ij heat map
-    a, b = three[0], three[1] if len(three) > 1 else three[0]
-    ia, ib = costs["names"].index(a), costs["names"].index(b)
-    C = np.asarray(costs["matrix"])[ia, ib]
+    return _save(fig, out_dir, "hog_drawings.png")
+
+
+def _figure_dij(costs, a: str, b: str, V: int, out_dir: str) -> str:
+    """Heat map of D_ij(t1, t2) = C_ij(t2 - t1) for shapes a, b."""
+    plt = _plt()
+    C = np.asarray(costs["matrix"])[costs["names"].index(a), costs["names"].index(b)]
     t = np.arange(V)
-    D = C[(t[None, :] - t[:, None]) % V]
     fig, ax = plt.subplots(figsize=(5, 4.3))
-    im = ax.imshow(D, cmap="viridis")
+    im = ax.imshow(C[(t[None, :] - t[:, None]) % V], cmap="viridis")
     ax.set_xlabel(f"label t2 of {b}")
     ax.set_ylabel(f"label t1 of {a}")
     ax.set_title(f"D_ij(t1,t2) = C_ij(t2-t1), {a} vs {b}")
     fig.colorbar(im, ax=ax)
-    fig.tight_layout()
-    fig.savefig(os.path.join(out_dir, "dij_heatmap.png"), dpi=90)
-    plt.close(fig)
-    made.append("dij_heatmap.png")
-    # best and worst view pairs (per-view HoG distance)
+    return _save(fig, out_dir, "dij_heatmap.png")
+
+
+def _figure_view_pairs(views, features, a: str, b: str, out_dir: str) -> str:
+    """The most and the least similar view pair of shapes a and b (squared HoG distance per view)."""
+    plt = _plt()
     Fa, Fb = np.asarray(features[a], np.float64), np.asarray(features[b], np.float64)
     d = (Fa ** 2).sum(1)[:, None] + (Fb ** 2).sum(1)[None, :] - 2 * Fa @ Fb.T
     best, worst = np.unravel_index(np.argmin(d), d.shape), np.unravel_index(np.argmax(d), d.shape)
     fig, axes = plt.subplots(2, 2, figsize=(5, 5))
     for r, (pair, title) in enumerate(((best, "best"), (worst, "worst"))):
-        axes[r, 0].imshow(views[a]["views"][pair[0]], cmap="gray", vmin=0, vmax=255)
-        axes[r, 0].set_title(f"{title}: {a} view {pair[0]}", fontsize=8)
-        axes[r, 1].imshow(views[b]["views"][pair[1]], cmap="gray", vmin=0, vmax=255)
-        axes[r, 1].set_title(f"{b} view {pair[1]} (d={d[pair]:.1f})", fontsize=8)
-    for ax in axes.ravel():
-        ax.axis("off")
-    fig.tight_layout()
-    fig.savefig(os.path.join(out_dir, "view_pairs_best_worst.png"), dpi=90)
-    plt.close(fig)
-    made.append("view_pairs_best_worst.png")
-    # 3x3 grid of aligned shapes (aligned view 0 = original view label)
-    nine = _pick(names, list(grid), 9)
+        for c, (shape, k) in enumerate(((a, pair[0]), (b, pair[1]))):
+            axes[r, c].imshow(views[shape]["views"][k], cmap="gray", vmin=0, vmax=255)
+            axes[r, c].set_title(f"{title}: {shape} view {k}" + (f" (d={d[pair]:.1f})" if c else ""), fontsize=8)
+            axes[r, c].axis("off")
+    return _save(fig, out_dir, "view_pairs_best_worst.png")
+
+
+def _figure_grid(views, labels: dict, shapes: list[str], V: int, out_dir: str) -> str:
+    """3x3 grid of aligned shapes: each shape's view at the common frame's view 0."""
+    plt = _plt()
     fig, axes = plt.subplots(3, 3, figsize=(6, 6))
-    for ax, n in zip(axes.ravel(), nine):
-        k = _aligned_view_index(int(labels[n]), V)
-        ax.imshow(views[n]["views"][k], cmap="gray", vmin=0, vmax=255)
+    for ax, n in zip(axes.ravel(), shapes):
+        ax.imshow(views[n]["views"][_aligned_view_index(int(labels[n]), V)], cmap="gray", vmin=0, vmax=255)
         ax.set_title(f"{n}: label {int(labels[n])}", fontsize=8)
     for ax in axes.ravel():
         ax.axis("off")
     fig.suptitle("aligned shapes (common view 0)")
-    fig.tight_layout()
-    fig.savefig(os.path.join(out_dir, "aligned_grid.png"), dpi=90)
-    plt.close(fig)
-    made.append("aligned_grid.png")
+    return _save(fig, out_dir, "aligned_grid.png")
+
+
+@register("align.figures", fanout="once", writes_files=True)
+def figures(views, features, costs, solution, *, shapes: list = ("001", "002", "003"),
+            grid: list = ("001", "002", "003", "004", "005", "006", "007", "008", "009"),
+            hog_views: list = (0, 4, 8), out_dir: str) -> dict:
+    """Figures: HoG drawings of 3 views of 3 shapes, the D_ij heat map of the first two shapes, their best
+    and worst view pairs, and a 3x3 grid of aligned shapes (falls back to the first shapes by name)."""
+    names = list(solution["names"])
+    labels = dict(zip(names, np.asarray(solution["labels"])))
+    V = int(solution["n_views"])
+    three = _pick(names, list(shapes), 3)
+    a, b = three[0], three[1] if len(three) > 1 else three[0]
+    made = [_figure_hog(views, features, three, list(hog_views), V, out_dir),
+            _figure_dij(costs, a, b, V, out_dir),
+            _figure_view_pairs(views, features, a, b, out_dir),
+            _figure_grid(views, labels, _pick(names, list(grid), 9), V, out_dir)]
     return {"figures": made}
 
 
