@@ -9,6 +9,8 @@ from __future__ import annotations
 import ast
 import hashlib
 import inspect
+import json
+import os
 import textwrap
 import types
 from typing import Any
@@ -29,6 +31,63 @@ def _strip_docstrings(tree: ast.AST) -> ast.AST:
                     and isinstance(body[0].value.value, str):
                 node.body = body[1:] or [ast.Pass()]
     return tree
+
+
+_MEMO: dict[int, tuple[Any, str, frozenset]] = {}
+_DISK: dict = {"path": None, "table": {}, "dirty": False}
+
+
+def use_disk_cache(path: str) -> None:
+    """Keep digests across processes in ``path`` (JSON), keyed by source file, its size and mtime, and the
+    object's name and line: a no-op run then parses no source at all."""
+    if _DISK["path"] == path:
+        return
+    _DISK.update(path=path, dirty=False)
+    try:
+        with open(path, encoding="utf-8") as fh:
+            _DISK["table"] = json.load(fh)
+    except (OSError, ValueError):
+        _DISK["table"] = {}
+
+
+def save_disk_cache() -> None:
+    """Write the digest cache if it changed (atomically)."""
+    if _DISK["path"] and _DISK["dirty"]:
+        tmp = f"{_DISK['path']}.{os.getpid()}.tmp"
+        os.makedirs(os.path.dirname(_DISK["path"]), exist_ok=True)
+        with open(tmp, "w", encoding="utf-8") as fh:
+            json.dump(_DISK["table"], fh)
+        os.replace(tmp, _DISK["path"])
+        _DISK["dirty"] = False
+
+
+def _disk_key(obj: Any) -> str | None:
+    try:
+        path = inspect.getsourcefile(obj)
+        st = os.stat(path)
+        line = obj.__code__.co_firstlineno if hasattr(obj, "__code__") else ""
+        return f"{path}:{st.st_size}:{st.st_mtime_ns}:{obj.__module__}.{obj.__qualname__}:{line}"
+    except (TypeError, OSError, AttributeError):
+        return None
+
+
+def _digest_and_refs(obj: Any) -> tuple[str, frozenset]:
+    """(AST digest, dotted names it references) of a function or class, memoized per object and on disk."""
+    hit = _MEMO.get(id(obj))
+    if hit is not None and hit[0] is obj:
+        return hit[1], hit[2]
+    key = _disk_key(obj) if _DISK["path"] else None
+    if key is not None and key in _DISK["table"]:
+        digest, refs_list = _DISK["table"][key]
+        refs = frozenset(tuple(r) for r in refs_list)
+    else:
+        digest, tree = _ast_digest(obj)
+        refs = frozenset(_referenced_names(tree)) if tree is not None else frozenset()
+        if key is not None:
+            _DISK["table"][key] = [digest, sorted(refs)]
+            _DISK["dirty"] = True
+    _MEMO[id(obj)] = (obj, digest, refs)
+    return digest, refs
 
 
 def _ast_digest(obj: Any) -> tuple[str, ast.AST | None]:
@@ -103,14 +162,14 @@ def code_fingerprint(func: Any) -> tuple[str, dict[str, str]]:
         if qual.startswith("const:"):
             parts[qual] = hashlib.blake2b(repr(obj).encode(), digest_size=8).hexdigest()
             continue
-        digest, tree = _ast_digest(obj)
+        digest, refs = _digest_and_refs(obj)
         parts[qual] = digest
-        if tree is None:
+        if not refs:
             continue
         namespace = dict(getattr(inspect.getmodule(obj), "__dict__", {}))
         if inspect.isfunction(obj) and obj.__closure__:
             namespace.update(zip(obj.__code__.co_freevars, (c.cell_contents for c in obj.__closure__)))
-        for chain in _referenced_names(tree):
+        for chain in refs:
             for name, target in _resolve(chain, namespace, extra):
                 if name.startswith("const:"):
                     name = f"const:{getattr(inspect.getmodule(obj), '__name__', '?')}.{chain[0]}"

@@ -18,6 +18,7 @@ from typing import Any
 from . import registry
 from .config import DatasetSpec, GeneratedPath, Pipeline, StageSpec
 from .errors import PipelineError
+from . import fingerprint
 from .fingerprint import code_fingerprint
 from .store import Store, atomic_write_text, digest_json, file_checksum
 
@@ -150,6 +151,7 @@ def _deps_of(spec: dict) -> list[str]:
 def build_plan(pipe: Pipeline, log=print) -> Plan:
     """Resolve generated data and datasets, then compute every task and its key (runs nothing else)."""
     store = Store(pipe.cache_dir)
+    fingerprint.use_disk_cache(os.path.join(store.root, "fingerprints.json"))
     hasher = FileHasher(store)
     _materialize_generated(pipe, store, log)
     datasets = {name: _dataset_source(pipe, ds, hasher) for name, ds in pipe.datasets.items()}
@@ -160,6 +162,7 @@ def build_plan(pipe: Pipeline, log=print) -> Plan:
         sp = _plan_stage(pipe, spec, sources)
         stages[name] = sp
         sources[name] = sp.source
+    fingerprint.save_disk_cache()
     return Plan(pipe, store, stages, datasets)
 
 
