@@ -137,6 +137,48 @@ def shift_costs(C: np.ndarray, shifts: np.ndarray) -> np.ndarray:
     return np.take_along_axis(C, idx, axis=2)
 
 
+def _agreement(a: np.ndarray, b: np.ndarray, V: int) -> dict:
+    """Exact and within-one-view agreement of two labelings up to one global offset."""
+    return {"exact": float(azimuth.agreement_up_to_offset(a, b, V, tolerance=0)[0]),
+            "within_one_view": float(azimuth.agreement_up_to_offset(a, b, V, tolerance=1)[0]), "n": int(len(a))}
+
+
+def seed_stability(C: np.ndarray, solution: dict, seeds: list) -> dict:
+    """Agreement (exact, up to one offset) with the solution of the labelings from other unary seeds."""
+    labels, V = np.asarray(solution["labels"]), C.shape[2]
+    others = [solve_labels(C, solution["solver"], float(solution["sigma"]), int(s), int(solution.get("knn", 0)))
+              ["labels"] for s in seeds if int(s) != solution["seed"]]
+    agree = [azimuth.agreement_up_to_offset(r, labels, V)[0] for r in others]
+    return {"min": float(min(agree)) if agree else 1.0, "mean": float(np.mean(agree)) if agree else 1.0,
+            "n_seeds": len(others) + 1}
+
+
+def equivariance(C: np.ndarray, solution: dict, shift_seed: int) -> float:
+    """Shift every shape's views by a known random offset, solve again: fraction whose label moved by it."""
+    N, _, V = C.shape
+    shifts = np.random.default_rng(shift_seed).integers(0, V, N)
+    shifted = solve_labels(shift_costs(C, shifts), solution["solver"], float(solution["sigma"]),
+                           int(solution["seed"]), int(solution.get("knn", 0)))["labels"]
+    return float(azimuth.agreement_up_to_offset(shifted, (np.asarray(solution["labels"]) + shifts) % V, V)[0])
+
+
+def solver_quality(C: np.ndarray, solution: dict, peer_labels: dict, restarts: int, seed: int) -> dict:
+    """Energies on the complete graph with the solution's unary terms: the answer, ICM from random starts,
+    the best of ``restarts`` random restarts, each solver's labeling, a random labeling, and an upper bound."""
+    N, _, V = C.shape
+    op = circular.CirculantPairwise(C, float(solution["sigma"]))
+    unary = circular.uniform_unary(N, V, int(solution["seed"]))
+    rng = np.random.default_rng(seed)
+    energy = lambda lab: float(mrf.energy(op, unary, lab))  # noqa: E731
+    icm = [energy(mrf.icm(op, unary, mrf.random_labels(N, V, rng))) for _ in range(5)]
+    quality = {"energy": energy(np.asarray(solution["labels"])), "icm_random_start_mean": float(np.mean(icm)),
+               "best_of_random_restarts": float(mrf.best_of_random_restarts(op, unary, restarts, seed=seed)[1]),
+               "upper_bound": float(mrf.upper_bound(op, unary)),
+               "random_labeling": energy(mrf.random_labels(N, V, rng))}
+    quality.update({f"energy_{peer}": energy(lab) for peer, lab in peer_labels.items()})
+    return quality
+
+
 @register("align.evaluate", fanout="once")
 def evaluate(costs, solution, ground_truth=None, other=None, *, seeds: list = (0, 1, 2, 3, 4),
              shift_seed: int = 123, restarts: int = 20, compare_solvers: bool = True) -> dict:
@@ -146,67 +188,40 @@ def evaluate(costs, solution, ground_truth=None, other=None, *, seeds: list = (0
     - seed_stability: agreement of the labelings from several unary seeds with the first;
     - equivariance: shift each shape's views by known random offsets, solve again, fraction whose label moved
       by exactly that offset;
-    - solver quality: energies of LH, ICM from random starts, best of random restarts, the peers, and an
-      upper bound;
-    - ground truth (generated data): fraction exact and within one view;
-    - mode agreement with another run's solution (e.g. meshes vs pre-rendered views) on common shapes.
+    - solver_quality: energies of the answer, ICM from random starts, best of random restarts, each solver
+      (lh, spectral, ppm when ``compare_solvers``), a random labeling, and an upper bound; agreement_with peers;
+    - ground_truth (generated data): fraction exact and within one view (per solver too);
+    - mode_agreement with another run's solution (e.g. meshes vs pre-rendered views) on common shapes.
+    Re-solves use the solution's graph (``knn``); energies use the complete graph.
     """
     C = np.asarray(costs["matrix"])  # float32 as stored (the operators compute in float64)
-    names = list(solution["names"])
-    labels = np.asarray(solution["labels"])
+    names, labels = list(solution["names"]), np.asarray(solution["labels"])
     N, _, V = C.shape
-    # re-solves (seed stability, equivariance) use the solution's graph; energies use the complete graph
-    sigma, solver, knn = float(solution["sigma"]), solution["solver"], int(solution.get("knn", 0))
-    m: dict = {"n_shapes": N, "n_views": V, "solver": solver, "sigma": sigma,
+    m: dict = {"n_shapes": N, "n_views": V, "solver": solution["solver"], "sigma": float(solution["sigma"]),
                "labels": {n: int(l) for n, l in zip(names, labels)},
-               "angle_deg": {n: float(l * 360.0 / V) for n, l in zip(names, labels)}}
-    # seed stability
-    runs = [labels] + [solve_labels(C, solver, sigma, int(s), knn)["labels"] for s in seeds
-                       if int(s) != solution["seed"]]
-    agree = [azimuth.agreement_up_to_offset(r, labels, V)[0] for r in runs[1:]]
-    m["seed_stability"] = {"min": float(min(agree)) if agree else 1.0,
-                           "mean": float(np.mean(agree)) if agree else 1.0, "n_seeds": len(runs)}
-    # equivariance
-    shifts = np.random.default_rng(shift_seed).integers(0, V, N)
-    shifted = solve_labels(shift_costs(C, shifts), solver, sigma, int(solution["seed"]), knn)["labels"]
-    m["equivariance"] = float(azimuth.agreement_up_to_offset(shifted, (labels + shifts) % V, V)[0])
-    # solver quality on the same unary terms
-    op = circular.CirculantPairwise(C, sigma)
-    unary = circular.uniform_unary(N, V, int(solution["seed"]))
-    rng = np.random.default_rng(shift_seed)
-    icm_energies = [mrf.energy(op, unary, mrf.icm(op, unary, mrf.random_labels(N, V, rng))) for _ in range(5)]
-    best_labels, best_e = mrf.best_of_random_restarts(op, unary, restarts, seed=shift_seed)
-    quality = {"energy": float(mrf.energy(op, unary, labels)), "icm_random_start_mean": float(np.mean(icm_energies)),
-               "best_of_random_restarts": float(best_e), "upper_bound": float(mrf.upper_bound(op, unary)),
-               "random_labeling": float(mrf.energy(op, unary, mrf.random_labels(N, V, rng)))}
+               "angle_deg": {n: float(l * 360.0 / V) for n, l in zip(names, labels)},
+               "seed_stability": seed_stability(C, solution, list(seeds)),
+               "equivariance": equivariance(C, solution, shift_seed)}
+    peers = {}
     if compare_solvers:
-        for peer in ("lh", "spectral", "ppm"):
-            peer_labels = labels if peer == solver else solve_labels(C, peer, sigma, int(solution["seed"]))["labels"]
-            quality[f"energy_{peer}"] = float(mrf.energy(op, unary, peer_labels))
-            if peer != solver:
-                m.setdefault("agreement_with", {})[peer] = float(azimuth.agreement_up_to_offset(peer_labels, labels, V)[0])
-    m["solver_quality"] = quality
+        peers = {p: labels if p == solution["solver"] else
+                 solve_labels(C, p, float(solution["sigma"]), int(solution["seed"]))["labels"]
+                 for p in ("lh", "spectral", "ppm")}
+        m["agreement_with"] = {p: float(azimuth.agreement_up_to_offset(lab, labels, V)[0])
+                               for p, lab in peers.items() if p != solution["solver"]}
+    m["solver_quality"] = solver_quality(C, solution, peers, restarts, shift_seed)
     gt = _read_ground_truth(ground_truth)
     if gt:
         common = [i for i, n in enumerate(names) if n in gt]
         truth = np.array([gt[names[i]] for i in common])
-        est = labels[common]
-        m["ground_truth"] = {"exact": float(azimuth.agreement_up_to_offset(est, truth, V, tolerance=0)[0]),
-                             "within_one_view": float(azimuth.agreement_up_to_offset(est, truth, V, tolerance=1)[0]),
-                             "n": len(common)}
-        if compare_solvers:
-            for peer in ("lh", "spectral", "ppm"):
-                pl = solve_labels(C, peer, sigma, int(solution["seed"]))["labels"][common]
-                m["ground_truth"][f"exact_{peer}"] = float(azimuth.agreement_up_to_offset(pl, truth, V)[0])
+        m["ground_truth"] = _agreement(labels[common], truth, V)
+        for p, lab in peers.items():
+            m["ground_truth"][f"exact_{p}"] = _agreement(lab[common], truth, V)["exact"]
     if other is not None:
         other_map = dict(zip(other["names"], np.asarray(other["labels"])))
         common = [i for i, n in enumerate(names) if n in other_map]
         if common:
-            a = labels[common]
-            b = np.array([other_map[names[i]] for i in common])
-            m["mode_agreement"] = {"exact": float(azimuth.agreement_up_to_offset(a, b, V)[0]),
-                                   "within_one_view": float(azimuth.agreement_up_to_offset(a, b, V, tolerance=1)[0]),
-                                   "n": len(common)}
+            m["mode_agreement"] = _agreement(labels[common], np.array([other_map[names[i]] for i in common]), V)
     return m
 
 
