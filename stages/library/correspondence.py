@@ -258,6 +258,47 @@ def _plot_accuracy_bars(acc: dict, path: str) -> None:
     plt.close(fig)
 
 
+def _top_confusions(mats: list[np.ndarray], rows: list[str], k: int = 10) -> dict[str, int]:
+    """The k most frequent wrong correspondences 'A -> B' with how many meshes made them."""
+    counts = np.sum(mats, axis=0)
+    wrong = {f"{rows[i]} -> {rows[j]}": int(counts[i, j])
+             for i in range(len(rows)) for j in np.flatnonzero(counts[i]) if j != i}
+    return dict(sorted(wrong.items(), key=lambda kv: -kv[1])[:k])
+
+
+def _method_report(label: str, preds: dict[str, np.ndarray], rows: list[str], out_dir: str) -> dict:
+    """Accuracy, per-mesh accuracy, binary matrices, confusions and the frequency figure of one method."""
+    n = len(rows)
+    mats = [evaluation.correspondence_matrix(p, n) for p in preds.values()]
+    truth = np.arange(n)
+    per_mesh = {m: float(evaluation.accuracy(p, truth)) for m, p in preds.items()}
+    acc = float(np.mean(list(per_mesh.values())))
+    evaluation.plot_frequency_matrix(evaluation.frequency_matrix(mats), rows, rows,
+                                     f"{label}: accumulated correspondences ({len(mats)} meshes, accuracy {acc:.3f})",
+                                     os.path.join(out_dir, f"frequency_{label}.png"))
+    return {"accuracy": acc, "per_mesh": per_mesh, "confusions": _top_confusions(mats, rows),
+            "matrices": {m: mat.astype(int).tolist() for m, mat in zip(preds, mats)}}
+
+
+def _dense_report(mobius_votes: dict, out_dir: str) -> dict:
+    """Geodesic error curve of the Möbius dense maps (Kim et al. 2011 measure) and the meshes skipped."""
+    out = {}
+    skipped = {m: r["dense_skipped"] for m, r in sorted(mobius_votes.items()) if "dense_skipped" in r}
+    if skipped:
+        out["dense_map_skipped"] = skipped
+    errors = np.concatenate([np.asarray(r["dense_errors"]) for r in mobius_votes.values() if "dense_errors" in r]
+                            or [np.zeros(0)])
+    if errors.size:
+        thresholds = np.linspace(0, 0.25, 51)
+        evaluation.plot_error_curves({"Möbius dense map": (thresholds, evaluation.geodesic_error_curve(errors, thresholds))},
+                                     os.path.join(out_dir, "dense_map_error_curve.png"))
+        out["dense_map"] = {"within_0.05": float(np.mean(errors <= 0.05)),
+                            "within_0.10": float(np.mean(errors <= 0.10)),
+                            "within_0.25": float(np.mean(errors <= 0.25)),
+                            "mean_error": float(errors.mean()), "n_points": int(errors.size)}
+    return out
+
+
 @register("corr.evaluate", fanout="once", writes_files=True)
 def evaluate(landmarks, sparse_landmarks, descriptor=None, mrf=None, mrf_oriented=None, mobius_votes=None,
              *, out_dir: str) -> dict:
@@ -269,53 +310,23 @@ def evaluate(landmarks, sparse_landmarks, descriptor=None, mrf=None, mrf_oriente
     (the template's and the test's landmark files list the same anatomical points in the same order).
     """
     _, names = _landmarks(landmarks, 1 << 40)
-    sp = _sparse_index(landmarks, sparse_landmarks, 1 << 40)
-    sparse_names = [names[i] for i in sp]
-    methods = {}
+    sparse_names = [names[i] for i in _sparse_index(landmarks, sparse_landmarks, 1 << 40)]
+    reports = {}
     for label, results, key in (("descriptor", descriptor, "all"), ("descriptor_sparse", descriptor, "sparse"),
                                 ("mrf", mrf, "all"), ("mrf_sparse", mrf, "sparse"),
                                 ("mrf_oriented", mrf_oriented, "all"),
                                 ("mrf_oriented_sparse", mrf_oriented, "sparse"),
                                 ("mobius_sparse", mobius_votes, "sparse"), ("mobius_all", mobius_votes, "all")):
         if results:
-            methods[label] = {mesh_name: np.asarray(r[key]) for mesh_name, r in sorted(results.items())}
-    accuracy, per_mesh, confusions, matrices = {}, {}, {}, {}
-    for label, preds in methods.items():
-        rows = sparse_names if label.endswith("sparse") else names
-        n = len(rows)
-        mats = [evaluation.correspondence_matrix(p, n) for p in preds.values()]
-        truth = np.arange(n)
-        accuracy[label] = float(np.mean([evaluation.accuracy(p, truth) for p in preds.values()]))
-        per_mesh[label] = {m: float(evaluation.accuracy(p, truth)) for m, p in preds.items()}
-        freq = evaluation.frequency_matrix(mats)
-        evaluation.plot_frequency_matrix(freq, rows, rows, f"{label}: accumulated correspondences "
-                                         f"({len(mats)} meshes, accuracy {accuracy[label]:.3f})",
-                                         os.path.join(out_dir, f"frequency_{label}.png"))
-        counts = np.sum(mats, axis=0)
-        wrong = {}
-        for i in range(n):
-            for j in np.flatnonzero(counts[i]):
-                if j != i:
-                    wrong[f"{rows[i]} -> {rows[j]}"] = int(counts[i, j])
-        confusions[label] = dict(sorted(wrong.items(), key=lambda kv: -kv[1])[:10])
-        matrices[label] = {m: mat.astype(int).tolist() for m, mat in zip(preds, mats)}
+            preds = {mesh_name: np.asarray(r[key]) for mesh_name, r in sorted(results.items())}
+            reports[label] = _method_report(label, preds, sparse_names if key == "sparse" else names, out_dir)
     with open(os.path.join(out_dir, "correspondences.json"), "w", encoding="utf-8") as fh:
-        json.dump({"landmarks": names, "sparse_landmarks": sparse_names, "matrices": matrices}, fh)
+        json.dump({"landmarks": names, "sparse_landmarks": sparse_names,
+                   "matrices": {k: r["matrices"] for k, r in reports.items()}}, fh)
+    accuracy = {k: r["accuracy"] for k, r in reports.items()}
     _plot_accuracy_bars(accuracy, os.path.join(out_dir, "accuracy.png"))
-    out = {"accuracy": accuracy, "accuracy_per_mesh": per_mesh, "top_confusions": confusions}
+    out = {"accuracy": accuracy, "accuracy_per_mesh": {k: r["per_mesh"] for k, r in reports.items()},
+           "top_confusions": {k: r["confusions"] for k, r in reports.items()}}
     if mobius_votes:
-        skipped = {m: r["dense_skipped"] for m, r in sorted(mobius_votes.items()) if "dense_skipped" in r}
-        if skipped:
-            out["dense_map_skipped"] = skipped
-        errors = np.concatenate([np.asarray(r["dense_errors"]) for r in mobius_votes.values() if "dense_errors" in r]
-                                or [np.zeros(0)])
-        if errors.size:
-            thresholds = np.linspace(0, 0.25, 51)
-            fractions = evaluation.geodesic_error_curve(errors, thresholds)
-            evaluation.plot_error_curves({"Möbius dense map": (thresholds, fractions)},
-                                         os.path.join(out_dir, "dense_map_error_curve.png"))
-            out["dense_map"] = {"within_0.05": float(np.mean(errors <= 0.05)),
-                                "within_0.10": float(np.mean(errors <= 0.10)),
-                                "within_0.25": float(np.mean(errors <= 0.25)),
-                                "mean_error": float(errors.mean()), "n_points": int(errors.size)}
+        out.update(_dense_report(mobius_votes, out_dir))
     return out
