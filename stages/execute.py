@@ -85,8 +85,13 @@ def make_client(workers: int = 2, scheduler: str | None = None, local_dir: str |
     return Client(cluster)
 
 
-def execute(tasks: list[Task], store: Store, client=None, quiet: bool = False, stream=None) -> Outcome:
-    """Run ``tasks`` (cache misses, in dependency order); ``client=None`` runs them in this process."""
+def execute(tasks: list[Task], store: Store, client=None, quiet: bool = False, stream=None,
+            key_suffix: str = "") -> Outcome:
+    """Run ``tasks`` (cache misses, in dependency order); ``client=None`` runs them in this process.
+
+    key_suffix: appended to the dask keys. A repair pass after a corrupt input must not reuse the first pass's
+    keys, or the scheduler may hand back the first pass's (corrupt) results instead of running the tasks again.
+    """
     outcome = Outcome()
     t0 = time.time()
     unique: dict[str, Task] = {}
@@ -109,7 +114,7 @@ def execute(tasks: list[Task], store: Store, client=None, quiet: bool = False, s
         futures = {}
         for t in unique.values():
             ups = [futures[k] for k in t.deps if k in futures]
-            dask_key = f"{t.stage}-{t.label or 'once'}-{t.key[:16]}".replace(" ", "_")
+            dask_key = f"{t.stage}-{t.label or 'once'}-{t.key[:16]}{key_suffix}".replace(" ", "_")
             futures[t.key] = client.submit(run_task, task_spec(t, store), *ups, key=dask_key, retries=0)
         by_future = {f.key: k for k, f in futures.items()}
         for fut in as_completed(list(futures.values())):

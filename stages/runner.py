@@ -189,7 +189,8 @@ def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None,
                 for t in missing:
                     reasons[t.stage] = reasons.get(t.stage, 0) + 1
                 log(f"running {len(missing)} task(s): " + ", ".join(f"{s} {n}" for s, n in reasons.items()))
-            outcome = execute(missing, plan.store, get_client(), quiet=quiet)
+            outcome = execute(missing, plan.store, get_client(), quiet=quiet,
+                              key_suffix=f"-repair{attempt}" if attempt else "")
             results.update(outcome.results)
             corrupt = outcome.corrupt()
             if not corrupt:
