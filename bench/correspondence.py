@@ -30,6 +30,17 @@ def timed(fn, *args, **kw):
     return out, time.perf_counter() - t0
 
 
+def print_shares(title: str, timings: dict[str, list[float]], whole: str) -> None:
+    """Mean seconds of each step, its share of the total, and the largest step."""
+    means = {k: float(np.mean(v)) for k, v in timings.items()}
+    total = sum(means.values())
+    print(f"\n{title}")
+    for k, v in means.items():
+        print(f"  {k:<26} {v:8.4f} s   {v / total:6.1%}")
+    largest = max(means, key=means.get)
+    print(f"  largest: {largest} ({means[largest] / total:.0%} of {whole})")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data" / "hw3" / "scape"))
@@ -57,12 +68,8 @@ def main() -> None:
         pre["flatten+samples"].append(t)
         prepared[path] = (m, s, g, f)
     n_vertices = len(prepared[template][0]["V"])
-    print(f"\npreprocessing, seconds per mesh ({len(prepared)} meshes, {n_vertices} vertices)")
-    total = sum(np.mean(v) for v in pre.values())
-    for k, v in pre.items():
-        print(f"  {k:<22} {np.mean(v):7.3f} s   {np.mean(v) / total:6.1%}")
-    largest = max(pre, key=lambda k: np.mean(pre[k]))
-    print(f"  largest step: {largest} ({np.mean(pre[largest]) / total:.0%} of preprocessing)")
+    print_shares(f"preprocessing, seconds per mesh ({len(prepared)} meshes, {n_vertices} vertices)", pre,
+                 "preprocessing")
     per = {"descriptor+Hungarian": [], "geodesic MRF": [], "geodesic MRF+orientation": [], "Möbius voting": []}
     mT, sT, gT, fT = prepared[template]
     for path in tests:
@@ -71,12 +78,7 @@ def main() -> None:
         per["geodesic MRF"].append(timed(corr.match_mrf, gT, g, lm, sparse)[1])
         per["geodesic MRF+orientation"].append(timed(corr.match_mrf, gT, g, lm, sparse, orientation=True)[1])
         per["Möbius voting"].append(timed(corr.match_mobius, fT, f, mT, m, lm, sparse, dense_points=0)[1])
-    print(f"\nmatching, seconds per pair ({len(tests)} pairs, all 20 + sparse 5 landmarks)")
-    total = sum(np.mean(v) for v in per.values())
-    for k, v in per.items():
-        print(f"  {k:<26} {np.mean(v):8.4f} s   {np.mean(v) / total:6.1%}")
-    largest = max(per, key=lambda k: np.mean(per[k]))
-    print(f"  largest: {largest} ({np.mean(per[largest]) / total:.0%} of matching time)")
+    print_shares(f"matching, seconds per pair ({len(tests)} pairs, all 20 + sparse 5 landmarks)", per, "matching time")
 
 
 if __name__ == "__main__":

@@ -348,10 +348,9 @@ def _plan_stage(pipe: Pipeline, spec: StageSpec, sources: dict[str, Source]) -> 
         code = digest_json([code, mcode])
     tasks: list[Task] = []
 
-    def add_task(label: str, inputs: dict[str, dict], item_name: str | None, extra: Any = None):
+    def add_task(label: str, inputs: dict[str, dict], item_name: str | None):
         ids = {arg: _spec_key(s) for arg, s in inputs.items()}
-        key = _task_key(spec.function, code, spec.params, ids if extra is None else {"tile": extra},
-                        item_name if "item_name" in fn.engine_args else None)
+        key = _task_key(spec.function, code, spec.params, ids, item_name if "item_name" in fn.engine_args else None)
         deps = sorted({k for s in inputs.values() for k in _deps_of(s)})
         digests = {arg: digest_json(i) for arg, i in ids.items()}
         tasks.append(Task(spec.name, label, key, spec.function, spec.params, inputs, deps, digests, item_name))
@@ -382,9 +381,8 @@ def _plan_stage(pipe: Pipeline, spec: StageSpec, sources: dict[str, Source]) -> 
                 s1, e1 = blocks[bj]
                 a = {"kind": "stack", "parts": [over.items[n] for n in names[s0:e0]]}
                 b = {"kind": "stack", "parts": [over.items[n] for n in names[s1:e1]]}
-                ids = [_spec_key(a), _spec_key(b)]
                 key = add_task(f"tile {names[s0]}..{names[e0 - 1]} x {names[s1]}..{names[e1 - 1]}",
-                               {"A": a, "B": b}, None, extra=ids)
+                               {"A": a, "B": b}, None)
                 tiles.append([bi, bj, key])
         source = Source("pairs", pairs={"kind": "pairs", "names": names, "blocks": [list(b) for b in blocks],
                                         "tiles": tiles, "mirror": spec.function})

@@ -18,22 +18,17 @@ from .errors import CorruptEntry
 from .store import Store
 
 
-def load_input(store: Store, spec: dict, cache: dict | None = None) -> Any:
+def load_input(store: Store, spec: dict) -> Any:
     """Materialize one input spec (see plan.py) into the value the function receives."""
     kind = spec["kind"]
     if kind == "value":
         return spec["value"]
     if kind == "entry":
-        if cache is not None and spec["key"] in cache:
-            return cache[spec["key"]]
-        value = store.get(spec["key"])
-        if cache is not None:
-            cache[spec["key"]] = value
-        return value
+        return store.get(spec["key"])  # the store keeps a per-process cache of decoded entries
     if kind == "dict":
-        return {name: load_input(store, s, cache) for name, s in spec["items"].items()}
+        return {name: load_input(store, s) for name, s in spec["items"].items()}
     if kind == "stack":
-        return np.stack([np.asarray(load_input(store, s, cache)) for s in spec["parts"]])
+        return np.stack([np.asarray(load_input(store, s)) for s in spec["parts"]])
     if kind == "pairs":
         return assemble_pairs(store, spec)
     raise ValueError(f"unknown input kind {kind}")

@@ -80,11 +80,14 @@ def _neighbors(C: np.ndarray, knn: int):
     return circular.nearest_shapes(C, knn) if knn and knn < len(C) - 1 else None
 
 
-def solve_labels(C: np.ndarray, solver: str, sigma: float, seed: int, knn: int = 0) -> dict:
-    """Labels (N,) for pair costs C (N,N,V) with the chosen solver, plus energy diagnostics."""
+def solve_labels(C: np.ndarray, solver: str, sigma: float, seed: int, knn: int = 0, op=None) -> dict:
+    """Labels (N,) for pair costs C (N,N,V) with the chosen solver, plus energy diagnostics.
+
+    op: the MRF operator of (C, sigma, knn) when the caller already built it (its kernel is N*N*V exps)."""
     N, _, V = C.shape
     neighbors = _neighbors(C, knn)
-    op = circular.CirculantPairwise(C, sigma, neighbors)
+    if op is None:
+        op = circular.CirculantPairwise(C, sigma, neighbors)
     unary = circular.uniform_unary(N, V, seed)
     out: dict = {}
     if solver == "lh":
@@ -143,11 +146,12 @@ def _agreement(a: np.ndarray, b: np.ndarray, V: int) -> dict:
             "within_one_view": float(azimuth.agreement_up_to_offset(a, b, V, tolerance=1)[0]), "n": int(len(a))}
 
 
-def seed_stability(C: np.ndarray, solution: dict, seeds: list) -> dict:
-    """Agreement (exact, up to one offset) with the solution of the labelings from other unary seeds."""
+def seed_stability(C: np.ndarray, solution: dict, seeds: list, op=None) -> dict:
+    """Agreement (exact, up to one offset) with the solution of the labelings from other unary seeds.
+    op: the solution graph's operator, if already built."""
     labels, V = np.asarray(solution["labels"]), C.shape[2]
-    others = [solve_labels(C, solution["solver"], float(solution["sigma"]), int(s), int(solution.get("knn", 0)))
-              ["labels"] for s in seeds if int(s) != solution["seed"]]
+    others = [solve_labels(C, solution["solver"], float(solution["sigma"]), int(s), int(solution.get("knn", 0)),
+                           op)["labels"] for s in seeds if int(s) != solution["seed"]]
     agree = [azimuth.agreement_up_to_offset(r, labels, V)[0] for r in others]
     return {"min": float(min(agree)) if agree else 1.0, "mean": float(np.mean(agree)) if agree else 1.0,
             "n_seeds": len(others) + 1}
@@ -162,11 +166,13 @@ def equivariance(C: np.ndarray, solution: dict, shift_seed: int) -> float:
     return float(azimuth.agreement_up_to_offset(shifted, (np.asarray(solution["labels"]) + shifts) % V, V)[0])
 
 
-def solver_quality(C: np.ndarray, solution: dict, peer_labels: dict, restarts: int, seed: int) -> dict:
+def solver_quality(C: np.ndarray, solution: dict, peer_labels: dict, restarts: int, seed: int, op=None) -> dict:
     """Energies on the complete graph with the solution's unary terms: the answer, ICM from random starts,
-    the best of ``restarts`` random restarts, each solver's labeling, a random labeling, and an upper bound."""
+    the best of ``restarts`` random restarts, each solver's labeling, a random labeling, and an upper bound.
+    op: the complete graph's operator, if already built."""
     N, _, V = C.shape
-    op = circular.CirculantPairwise(C, float(solution["sigma"]))
+    if op is None:
+        op = circular.CirculantPairwise(C, float(solution["sigma"]))
     unary = circular.uniform_unary(N, V, int(solution["seed"]))
     rng = np.random.default_rng(seed)
     energy = lambda lab: float(mrf.energy(op, unary, lab))  # noqa: E731
@@ -197,19 +203,23 @@ def evaluate(costs, solution, ground_truth=None, other=None, *, seeds: list = (0
     C = np.asarray(costs["matrix"])  # float32 as stored (the operators compute in float64)
     names, labels = list(solution["names"]), np.asarray(solution["labels"])
     N, _, V = C.shape
-    m: dict = {"n_shapes": N, "n_views": V, "solver": solution["solver"], "sigma": float(solution["sigma"]),
+    sigma = float(solution["sigma"])
+    neighbors = _neighbors(C, int(solution.get("knn", 0)))
+    graph_op = circular.CirculantPairwise(C, sigma, neighbors)          # the solution's graph: re-solves
+    full_op = graph_op if neighbors is None else circular.CirculantPairwise(C, sigma)   # energies, peers
+    m: dict = {"n_shapes": N, "n_views": V, "solver": solution["solver"], "sigma": sigma,
                "labels": {n: int(l) for n, l in zip(names, labels)},
                "angle_deg": {n: float(l * 360.0 / V) for n, l in zip(names, labels)},
-               "seed_stability": seed_stability(C, solution, list(seeds)),
+               "seed_stability": seed_stability(C, solution, list(seeds), graph_op),
                "equivariance": equivariance(C, solution, shift_seed)}
     peers = {}
     if compare_solvers:
         peers = {p: labels if p == solution["solver"] else
-                 solve_labels(C, p, float(solution["sigma"]), int(solution["seed"]))["labels"]
+                 solve_labels(C, p, sigma, int(solution["seed"]), op=full_op)["labels"]
                  for p in ("lh", "spectral", "ppm")}
         m["agreement_with"] = {p: float(azimuth.agreement_up_to_offset(lab, labels, V)[0])
                                for p, lab in peers.items() if p != solution["solver"]}
-    m["solver_quality"] = solver_quality(C, solution, peers, restarts, shift_seed)
+    m["solver_quality"] = solver_quality(C, solution, peers, restarts, shift_seed, full_op)
     gt = _read_ground_truth(ground_truth)
     if gt:
         common = [i for i, n in enumerate(names) if n in gt]

@@ -24,12 +24,12 @@ from corr_core.sampling import farthest_point_samples
 from ..registry import register
 
 
-def _landmarks(path: str, n_vertices: int) -> tuple[np.ndarray, list[str]]:
+def _landmarks(path: str, n_vertices: int | None = None) -> tuple[np.ndarray, list[str]]:
     ids, names = read_landmarks(path, n_vertices=n_vertices)
     return np.asarray(ids, dtype=np.int64), list(names)
 
 
-def _sparse_index(all_path: str, sparse_path: str, n_vertices: int) -> np.ndarray:
+def _sparse_index(all_path: str, sparse_path: str, n_vertices: int | None = None) -> np.ndarray:
     """Positions of the sparse landmarks within the full landmark list: (k,) int."""
     ids, _ = _landmarks(all_path, n_vertices)
     sids, _ = _landmarks(sparse_path, n_vertices)
@@ -157,8 +157,7 @@ def match_descriptor(template, target, landmarks, sparse_landmarks, *, descripto
     """
     DT, DS = _descriptor_matrix(template, descriptor), _descriptor_matrix(target, descriptor)
     cost = desc.descriptor_distance(DT, DS, metric=metric)
-    n_vertices = 1 << 40
-    sp = _sparse_index(landmarks, sparse_landmarks, n_vertices)
+    sp = _sparse_index(landmarks, sparse_landmarks)
     return {"all": hungarian_match(cost), "sparse": hungarian_match(cost[np.ix_(sp, sp)])}
 
 
@@ -170,7 +169,7 @@ def match_mrf(template, target, landmarks, sparse_landmarks, *, sigma: float = 0
 
     Returns {"all": (L,), "sparse": (k,)}.
     """
-    sp = _sparse_index(landmarks, sparse_landmarks, 1 << 40)
+    sp = _sparse_index(landmarks, sparse_landmarks)
     out = {}
     for key, idx in (("all", np.arange(len(template["D"]))), ("sparse", sp)):
         dT, dS = template["D"][np.ix_(idx, idx)], target["D"][np.ix_(idx, idx)]
@@ -208,7 +207,7 @@ def match_mobius(template, target, template_mesh, target_mesh, landmarks, sparse
     "best_score": float}. The dense errors need the truth "vertex i <-> vertex i", i.e. the same vertex count
     and faces as the template; otherwise they are left out and "dense_skipped" (str) says why.
     """
-    sp = _sparse_index(landmarks, sparse_landmarks, 1 << 40)
+    sp = _sparse_index(landmarks, sparse_landmarks)
     Zs, Zt = _z(template), _z(target)
     Ss, St = template["sample_eids"], target["sample_eids"]
     hs, ht = np.sqrt(template["area"] / len(Ss)), np.sqrt(target["area"] / len(St))
@@ -309,8 +308,8 @@ def evaluate(landmarks, sparse_landmarks, descriptor=None, mrf=None, mrf_oriente
     Each method input is {test mesh: {"all": (L,), "sparse": (k,)}}; the truth is landmark i -> landmark i
     (the template's and the test's landmark files list the same anatomical points in the same order).
     """
-    _, names = _landmarks(landmarks, 1 << 40)
-    sparse_names = [names[i] for i in _sparse_index(landmarks, sparse_landmarks, 1 << 40)]
+    _, names = _landmarks(landmarks)
+    sparse_names = [names[i] for i in _sparse_index(landmarks, sparse_landmarks)]
     reports = {}
     for label, results, key in (("descriptor", descriptor, "all"), ("descriptor_sparse", descriptor, "sparse"),
                                 ("mrf", mrf, "all"), ("mrf_sparse", mrf, "sparse"),
