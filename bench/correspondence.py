@@ -19,7 +19,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from stages.library import correspondence as corr  # noqa: E402
+from shapecorr import correspondence as corr  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

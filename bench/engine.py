@@ -21,7 +21,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from stages import runner  # noqa: E402
-from stages.library import synthetic  # noqa: E402
+from shapecorr import synthetic  # noqa: E402
 
 YAML = """\
 name: bench

@@ -150,7 +150,7 @@ def synth_costs(n: int, path: Path, tile: int = 500) -> dict:
     engine's pair stage) and save it with the planted offsets; returns timing and peak RSS of this process."""
     import resource
 
-    from corr_core import circular
+    from corr_core.alignment import pair_costs as circular
 
     t0 = time.time()
     F, offsets = synth_features(n)
@@ -173,7 +173,13 @@ def _child_mrf(path: str, solver: str, knn: int) -> dict:
     kNN graph, operator, spectral sync or LH, energy); report times and ru_maxrss (C included)."""
     import resource
 
-    from corr_core import azimuth, circular, mrf, sync
+    from corr_core.alignment import azimuth
+
+    from corr_core.alignment import pair_costs as circular
+
+    from corr_core import mrf
+
+    from corr_core.alignment import sync
 
     C = np.load(path)
     offsets = np.load(path + ".offsets.npy")

@@ -15,7 +15,7 @@ import textwrap
 import types
 from typing import Any
 
-PROJECT_PACKAGES = ("corr_core", "stages")
+PROJECT_PACKAGES = ("corr_core", "stages", "shapecorr")
 
 
 def _is_project(obj: Any, extra: frozenset = frozenset()) -> bool:

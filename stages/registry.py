@@ -112,7 +112,7 @@ def load_library() -> None:
     global _LOADED
     if _LOADED:
         return
-    importlib.import_module("stages.library")
+    importlib.import_module("shapecorr")
     for mod in filter(None, (m.strip() for m in os.environ.get("STAGES_PLUGINS", "").split(","))):
         importlib.import_module(mod)
     _LOADED = True

@@ -97,7 +97,7 @@ def test_exports_and_figures(chairs_project, dask_client):
     objs = sorted((out / "export" / "aligned_meshes").glob("*.obj"))
     assert len(objs) == 10 and (out / "export" / "aligned_meshes.zip").is_file()
     # aligned meshes are normalized and rotated to a common frame: their x-z footprints agree
-    from corr_core.meshio import load_mesh
+    from corr_core.geometry.mesh_io import load_mesh
     V1, _ = load_mesh(objs[0])
     assert np.linalg.norm(V1, axis=1).max() == pytest.approx(1.0, abs=1e-6)
     for name in ("hog_drawings.png", "dij_heatmap.png", "view_pairs_best_worst.png", "aligned_grid.png"):
@@ -110,8 +110,8 @@ def test_aligned_meshes_share_a_frame(chairs_project, dask_client):
     _run(chairs_project, dask_client)
     out = chairs_project / "results" / "align_test" / "export" / "aligned_meshes"
     from corr_core.generate.chairs import canonical_chair
-    from corr_core.meshio import load_mesh, normalize_mesh
-    from corr_core.render import rotate_about_y
+    from corr_core.geometry.mesh_io import load_mesh, normalize_mesh
+    from corr_core.alignment.render import rotate_about_y
     angles = []
     for i in (1, 2, 3):
         Va, _ = load_mesh(out / f"{i:03d}.obj")

@@ -1,8 +1,8 @@
-"""Tests for corr_core.azimuth."""
+"""Tests for corr_core.alignment.azimuth."""
 import numpy as np
 import pytest
 
-from corr_core.azimuth import (agreement_up_to_offset, circular_distance, labels_to_angles,
+from corr_core.alignment.azimuth import (agreement_up_to_offset, circular_distance, labels_to_angles,
                                relabel_by_offset)
 
 

@@ -1,10 +1,10 @@
-"""Tests for corr_core.circular: pair costs vs the naive loop, the circulant MRF operator vs the dense one."""
+"""Tests for corr_core.alignment.pair_costs: pair costs vs the naive loop, the circulant MRF operator vs the dense one."""
 import itertools
 
 import numpy as np
 import pytest
 
-from corr_core.circular import (CirculantPairwise, auto_sigma, dense_pairwise, mirror_pair_costs,
+from corr_core.alignment.pair_costs import (CirculantPairwise, auto_sigma, dense_pairwise, mirror_pair_costs,
                                 nearest_shapes, pair_costs, pair_costs_naive, uniform_unary)
 from corr_core.mrf import DensePairwise, energy, solve_lh
 
@@ -122,7 +122,7 @@ def _graph_mask(N, nb):
 
 
 def test_neighbor_graph_csr_matches_brute_force_union():
-    from corr_core.circular import neighbor_graph
+    from corr_core.alignment.pair_costs import neighbor_graph
     C = pair_costs(features(9, 6, 4, 12))
     nb = nearest_shapes(C, 3)
     indptr, indices = neighbor_graph(9, nb)
@@ -177,7 +177,7 @@ def test_dense_kernel_is_float32_and_exactly_symmetric():
 
 def test_blocked_matvec_equals_single_gemm(monkeypatch):
     """Row-blocked float64 accumulation over a float32 kernel == one float64 product of the upcast kernel."""
-    import corr_core.circular as circ
+    import corr_core.alignment.pair_costs as circ
     N, V = 13, 8
     C = pair_costs(features(N, V, 5, 16))
     op = CirculantPairwise(C, auto_sigma(C))

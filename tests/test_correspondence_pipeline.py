@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from corr_core.generate.humanoid import write_humanoid_dataset
-from corr_core.landmarks import read_landmarks
-from corr_core.meshcheck import check_correspondence_mesh
-from corr_core.meshio import load_mesh, save_obj
+from corr_core.correspondence.landmarks import read_landmarks
+from corr_core.geometry.checks import check_correspondence_mesh
+from corr_core.geometry.mesh_io import load_mesh, save_obj
 from stages import runner
 
 from conftest import COURSE_DATA

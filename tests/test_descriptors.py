@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from corr_core.descriptors import descriptor_distance, hks, hks_times, normalize_columns, wks
-from corr_core.laplacian import eigenpairs, laplacian_and_mass
-from corr_core.matching import hungarian_match
+from corr_core.correspondence.descriptors import descriptor_distance, hks, hks_times, normalize_columns, wks
+from corr_core.geometry.laplacian import eigenpairs, laplacian_and_mass
+from corr_core.correspondence.matching import hungarian_match
 from test_laplacian import sphere
 
 

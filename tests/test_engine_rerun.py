@@ -97,7 +97,7 @@ def test_results_match_a_plain_loop(project, dask_client, tmp_path):
     _run(project, dask_client)
     plan = runner.plan_pipeline(str(project), quiet=True)
     value = plan.store.get(plan.stages["summary"].tasks[0].key)
-    from stages.library import synthetic
+    from shapecorr import synthetic
     files = sorted((tmp_path / "data").glob("*.txt"))
     F = {f.stem: synthetic.features(str(f)) for f in files}
     names = sorted(F)

@@ -4,9 +4,9 @@ import warnings
 import numpy as np
 import pytest
 
-from corr_core.evaluation import (accuracy, correspondence_matrix, frequency_matrix, geodesic_error_curve,
+from corr_core.correspondence.measures import (accuracy, correspondence_matrix, frequency_matrix, geodesic_error_curve,
                                   geodesic_errors, plot_error_curves, plot_frequency_matrix, surface_area)
-from corr_core.landmarks import read_landmarks
+from corr_core.correspondence.landmarks import read_landmarks
 from test_laplacian import sphere
 
 

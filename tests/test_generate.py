@@ -11,7 +11,7 @@ from scipy.spatial import cKDTree
 
 from corr_core.generate import chairs as C
 from corr_core.generate import humanoid as H
-from corr_core.meshio import load_mesh
+from corr_core.geometry.mesh_io import load_mesh
 
 COURSE_LANDMARK_NAMES = ["Left Toe", "Right Toe", "Left Knee", "Right Knee", "Left Hip", "Right Hip", "Left Hand",
                          "Right Hand", "Left Elbow", "Right Elbow", "Left Sholder", "Right Sholder", "Left Side",

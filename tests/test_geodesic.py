@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from corr_core.geodesic import geodesic_diameter, geodesic_distances, landmark_geodesics
+from corr_core.geometry.geodesic import geodesic_diameter, geodesic_distances, landmark_geodesics
 from test_laplacian import sphere
 
 

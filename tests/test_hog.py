@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from corr_core.hog import draw_hog, hog_dollar, hog_features, hog_skimage
+from corr_core.alignment.hog import draw_hog, hog_dollar, hog_features, hog_skimage
 
 N_ORIENTS = 9
 

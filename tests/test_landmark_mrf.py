@@ -4,7 +4,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from corr_core.landmark_mrf import (chirality_agreement, consistency_pairwise, descriptor_unary,
+from corr_core.correspondence.landmark_mrf import (chirality_agreement, consistency_pairwise, descriptor_unary,
                                     landmark_chirality, match_landmarks_mrf, match_landmarks_oriented,
                                     reliable_triples)
 from test_laplacian import sphere
@@ -115,12 +115,12 @@ def test_scape_three_meshes_accuracy():
     """Measured on mesh002/004/005: WKS (k=30 eigenpairs, to keep the test short) + Hungarian 0.767
     (0.6/0.7/1.0), geodesic MRF sigma=0.05 0.767 (1.0/0.3/1.0), oriented MRF 0.933 (1.0/0.8/1.0);
     thresholds are those minus a margin."""
-    from corr_core.descriptors import descriptor_distance, wks
-    from corr_core.geodesic import landmark_geodesics
-    from corr_core.landmarks import read_landmarks
-    from corr_core.laplacian import eigenpairs
-    from corr_core.matching import hungarian_match
-    from corr_core.meshio import load_mesh
+    from corr_core.correspondence.descriptors import descriptor_distance, wks
+    from corr_core.geometry.geodesic import landmark_geodesics
+    from corr_core.correspondence.landmarks import read_landmarks
+    from corr_core.geometry.laplacian import eigenpairs
+    from corr_core.correspondence.matching import hungarian_match
+    from corr_core.geometry.mesh_io import load_mesh
 
     scape = DATA / "scape"
     paths = [scape / "meshes/template/mesh000.obj"] + [scape / f"meshes/test/mesh{i}.obj" for i in ("002", "004", "005")]

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
-from corr_core.laplacian import eigenpairs, laplacian_and_mass
+from corr_core.geometry.laplacian import eigenpairs, laplacian_and_mass
 
 
 def sphere(n=1500, seed=0):

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from corr_core.meshcheck import check_correspondence_mesh, check_same_connectivity, largest_component
-from corr_core.meshio import MeshError
+from corr_core.geometry.checks import check_correspondence_mesh, check_same_connectivity, largest_component
+from corr_core.geometry.mesh_io import MeshError
 
 TET_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
 TET_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])

@@ -1,13 +1,13 @@
-"""Tests for corr_core.midedge (mid-edge conformal flattening)."""
+"""Tests for corr_core.geometry.midedge (mid-edge conformal flattening)."""
 from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.spatial import ConvexHull, Delaunay
 
-from corr_core.midedge import (edge_midpoints, mesh_edges, midedge_conformal_factor, midedge_flatten,
+from corr_core.geometry.midedge import (edge_midpoints, mesh_edges, midedge_conformal_factor, midedge_flatten,
                                vertex_to_edge)
-from corr_core.mobius import apply_mobius, fit_mobius
+from corr_core.correspondence.mobius import apply_mobius, fit_mobius
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared/data/hw3"
 SCAPE = DATA / "scape"
@@ -129,7 +129,7 @@ def test_flattening_preserves_orientation_and_scale_factor():
 def test_scape_template_agrees_with_course_flattening():
     if not SCAPE.is_dir():
         pytest.skip(f"course data not found at {SCAPE}")
-    from corr_core.meshio import load_mesh
+    from corr_core.geometry.mesh_io import load_mesh
     V, F = load_mesh(SCAPE / "meshes/template/mesh000.obj")
     Vo, Fo = load_mesh(SCAPE / "flattened_meshes/template/mesh000.obj")
     Z, edges, fe, kept = midedge_flatten(V, F, cut_faces=COURSE_CUT, seed_face=13465)

@@ -1,10 +1,10 @@
-"""Tests for corr_core.mobius (Möbius maps and Möbius voting)."""
+"""Tests for corr_core.correspondence.mobius (Möbius maps and Möbius voting)."""
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from corr_core.mobius import (apply_mobius, compose_mobius, dense_map, extend_landmarks, fit_mobius,
+from corr_core.correspondence.mobius import (apply_mobius, compose_mobius, dense_map, extend_landmarks, fit_mobius,
                               invert_mobius, mobius_derivative_abs, mobius_from_triplets,
                               mobius_to_canonical, mobius_vote_landmarks, mutually_closest_pairs, ROOTS3)
 
@@ -112,9 +112,9 @@ def test_voting_surface_metric_with_noise():
 def test_scape_two_meshes_voting():
     if not SCAPE.is_dir():
         pytest.skip(f"course data not found at {SCAPE}")
-    from corr_core.meshio import load_mesh
-    from corr_core.midedge import edge_midpoints, midedge_conformal_factor, midedge_flatten, vertex_to_edge
-    from corr_core.sampling import farthest_point_samples
+    from corr_core.geometry.mesh_io import load_mesh
+    from corr_core.geometry.midedge import edge_midpoints, midedge_conformal_factor, midedge_flatten, vertex_to_edge
+    from corr_core.geometry.sampling import farthest_point_samples
 
     sparse = np.loadtxt(SCAPE / "sparse_landmark_vids.txt", delimiter=",", usecols=0, dtype=int)
     full = np.loadtxt(SCAPE / "landmark_vids.txt", delimiter=",", usecols=0, dtype=int)

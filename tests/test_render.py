@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from corr_core._open3d import load_open3d
-from corr_core.render import camera_frames, render_views, rotate_about_y, rotation_about_y
+from corr_core.alignment.render import camera_frames, render_views, rotate_about_y, rotation_about_y
 
 N_VIEWS = 16
 SIZE = 48

@@ -1,8 +1,8 @@
-"""Tests for corr_core.sampling."""
+"""Tests for corr_core.geometry.sampling."""
 import numpy as np
 import pytest
 
-from corr_core.sampling import farthest_point_samples
+from corr_core.geometry.sampling import farthest_point_samples
 
 
 def brute_force_fps(P, k, start, dist):

@@ -1,14 +1,14 @@
-"""Tests for corr_core.sync (and end-to-end alignment): synthetic collections with planted rotations, noise and
+"""Tests for corr_core.alignment.sync (and end-to-end alignment): synthetic collections with planted rotations, noise and
 outlier pairs; a course-data equivariance check on 30 chairs."""
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from corr_core.azimuth import agreement_up_to_offset
-from corr_core.circular import CirculantPairwise, auto_sigma, mirror_pair_costs, pair_costs, uniform_unary
+from corr_core.alignment.azimuth import agreement_up_to_offset
+from corr_core.alignment.pair_costs import CirculantPairwise, auto_sigma, mirror_pair_costs, pair_costs, uniform_unary
 from corr_core.mrf import solve_lh
-from corr_core.sync import projected_power, round_phases, spectral_sync, sync_matrix
+from corr_core.alignment.sync import projected_power, round_phases, spectral_sync, sync_matrix
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared/data/hw3"
 
@@ -142,7 +142,7 @@ def test_course_chairs_equivariance():
 @pytest.mark.parametrize("seed", range(2))
 def test_spectral_ppm_and_lh_exact_on_knn_graph(seed):
     """Noisy planted rotations, no outliers: all three solvers exact on an 8-nearest graph (60 shapes)."""
-    from corr_core.circular import nearest_shapes
+    from corr_core.alignment.pair_costs import nearest_shapes
     C, offsets = synthetic_costs(N=60, seed=seed)
     sigma = auto_sigma(C)
     nb = nearest_shapes(C, 8)
@@ -157,7 +157,7 @@ def test_spectral_ppm_and_lh_exact_on_knn_graph(seed):
 def test_projected_power_on_knn_graph_survives_outlier_pairs():
     """With 20% outlier pairs a sparse graph has fewer votes per shape (spectral sync then drops to ~0.85 here,
     see docs/scale.md); the debiased projected power method still recovers every offset."""
-    from corr_core.circular import nearest_shapes
+    from corr_core.alignment.pair_costs import nearest_shapes
     C, offsets = synthetic_costs(N=60, seed=0, outlier_frac=0.2)
     sigma = auto_sigma(C)
     labels, _ = projected_power(C, sigma, neighbors=nearest_shapes(C, 8))
@@ -165,7 +165,7 @@ def test_projected_power_on_knn_graph_survives_outlier_pairs():
 
 
 def test_sync_matrix_on_knn_graph_is_the_complete_one_restricted():
-    from corr_core.circular import nearest_shapes
+    from corr_core.alignment.pair_costs import nearest_shapes
     C, _ = synthetic_costs(N=15, seed=3, outlier_frac=0.3)
     nb = nearest_shapes(C, 2)
     mask = np.zeros((15, 15), dtype=bool)
@@ -177,8 +177,8 @@ def test_sync_matrix_on_knn_graph_is_the_complete_one_restricted():
 @pytest.mark.parametrize("use_knn", [False, True])
 def test_lanczos_path_gives_the_dense_eigensolve_labels(monkeypatch, use_knn):
     """Above DENSE_EIGH_MAX shapes spectral sync uses eigsh for the top eigenvector: same labels as eigh."""
-    import corr_core.sync as sync
-    from corr_core.circular import nearest_shapes
+    import corr_core.alignment.sync as sync
+    from corr_core.alignment.pair_costs import nearest_shapes
     C, offsets = synthetic_costs(N=50, seed=5, outlier_frac=0.3)
     nb = nearest_shapes(C, 6) if use_knn else None
     dense_labels = spectral_sync(C, None, nb)

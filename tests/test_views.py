@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from corr_core.views import (
+from corr_core.alignment.views import (
     crop_to_object,
     find_view_files,
     load_view_image,

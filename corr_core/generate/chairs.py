@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from corr_core.meshio import save_obj
+from corr_core.geometry.mesh_io import save_obj
 
 # ---------------------------------------------------------------------------------------------------------------
 # primitives

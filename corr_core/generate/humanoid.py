@@ -20,7 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from corr_core.meshio import save_obj
+from corr_core.geometry.mesh_io import save_obj
 
 ARM_DROP_DEG = 35.0
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from corr_core.matching import hungarian_match
+from corr_core.correspondence.matching import hungarian_match
 from corr_core.mrf import DensePairwise, energy, solve_lh
 
 
@@ -88,7 +88,7 @@ def match_landmarks_mrf(dT: np.ndarray, dS: np.ndarray, sigma: float = 0.05, una
 
     Args:
         dT: (n,n) template geodesic distances, dS: (L,L) test geodesic distances, both normalized by each
-            surface's geodesic diameter (``corr_core.geodesic.landmark_geodesics``).
+            surface's geodesic diameter (``corr_core.geometry.geodesic.landmark_geodesics``).
         sigma: consistency tolerance (units of squared normalized distance, see module docstring).
         unary: optional (n,L) reward added to the energy (e.g. ``descriptor_unary``); default none, i.e. a
             purely geodesic method.

@@ -1,6 +1,6 @@
 """Möbius voting for surface correspondence (Lipman & Funkhouser, SIGGRAPH 2009, sections 5-7).
 
-Both surfaces are flattened to the complex plane (``corr_core.midedge``). A Möbius map ``m(z) = (a z + b) /
+Both surfaces are flattened to the complex plane (``corr_core.geometry.midedge``). A Möbius map ``m(z) = (a z + b) /
 (c z + d)`` is fixed by three point pairs. For a source triplet ``(z1, z2, z3)`` and a target triplet
 ``(w1, w2, w3)`` we map each triplet to the *canonical frame*: the Möbius maps ``m_s``, ``m_t`` that send the
 triplet to the cube roots of unity ``(1, e^{2 pi i/3}, e^{4 pi i/3})``. In that frame both triplets sit on the

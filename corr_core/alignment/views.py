@@ -4,7 +4,7 @@ Course format: one PNG per (item, view), named ``<item>_<view>.png`` (e.g. ``007
 or RGB, cropped to the object (sizes vary), background pure blue (0, 0, 255). Loading maps the
 background to white, converts to grayscale (ITU-R 601 luma, [0, 1]), pads to a square (object
 centred, white padding) and resizes to ``size`` x ``size`` with an anti-aliasing filter, giving images
-that match ``corr_core.render.render_views`` (dark object on white).
+that match ``corr_core.alignment.render.render_views`` (dark object on white).
 """
 from __future__ import annotations
 

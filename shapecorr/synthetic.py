@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from ..registry import register
+from stages.registry import register
 
 
 def _seed_from_text(text: str) -> int:

@@ -1,6 +1,6 @@
 """Spectral point descriptors: Heat Kernel Signature (HKS) and Wave Kernel Signature (WKS).
 
-Both are built from the low-frequency Laplace–Beltrami eigenpairs of ``corr_core.laplacian.eigenpairs``
+Both are built from the low-frequency Laplace–Beltrami eigenpairs of ``corr_core.geometry.laplacian.eigenpairs``
 (M-orthonormal eigenvectors, so eigenvector signs and rotations inside eigenspaces do not matter: only
 ``phi_k(x)^2`` enters). They are invariant to isometries, hence blind to intrinsic symmetries (left/right).
 """

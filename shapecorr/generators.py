@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from corr_core.generate import write_chair_collection, write_humanoid_dataset
 
-from ..registry import register
+from stages.registry import register
 
 
 @register("generate.chairs", kind="generator")

@@ -113,7 +113,7 @@ def geodesic_errors(V: np.ndarray, F: np.ndarray, pred_vids, true_vids) -> np.nd
     Args: pred_vids, true_vids: (p,) int vertex ids on the target. Returns: (p,) float, geodesic distance
     (heat method) between predicted and true vertex divided by sqrt(surface area); dimensionless.
     """
-    from corr_core.geodesic import _solver
+    from corr_core.geometry.geodesic import _solver
 
     pred_vids = np.asarray(pred_vids, dtype=np.int64)
     true_vids = np.asarray(true_vids, dtype=np.int64)

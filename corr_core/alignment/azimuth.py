@@ -1,6 +1,6 @@
 """Azimuth labels (rotation offsets about +y in steps of 2*pi/V) and their comparison up to a global offset.
 
-Convention (see corr_core.circular): label x_i in 0..V-1 is shape i's rotation offset in steps relative to a
+Convention (see corr_core.alignment.pair_costs): label x_i in 0..V-1 is shape i's rotation offset in steps relative to a
 common frame; its angle is 2*pi*x_i/V radians; to align shape i rotate it by -x_i steps (-angle radians)
 about +y. Labelings that differ by one global offset (x_i + o for all i) are the same alignment.
 """

@@ -14,14 +14,20 @@ import os
 
 import numpy as np
 
-from corr_core import descriptors as desc
-from corr_core import evaluation, geodesic, landmark_mrf, laplacian, meshcheck, midedge, mobius
-from corr_core.landmarks import read_landmarks
-from corr_core.matching import hungarian_match
-from corr_core.meshio import load_mesh
-from corr_core.sampling import farthest_point_samples
+from corr_core.correspondence import descriptors as desc
+from corr_core.correspondence import measures as evaluation
+from corr_core.geometry import geodesic
+from corr_core.correspondence import landmark_mrf
+from corr_core.geometry import laplacian
+from corr_core.geometry import checks as meshcheck
+from corr_core.geometry import midedge
+from corr_core.correspondence import mobius
+from corr_core.correspondence.landmarks import read_landmarks
+from corr_core.correspondence.matching import hungarian_match
+from corr_core.geometry.mesh_io import load_mesh
+from corr_core.geometry.sampling import farthest_point_samples
 
-from ..registry import register
+from stages.registry import register
 
 
 def _landmarks(path: str, n_vertices: int | None = None) -> tuple[np.ndarray, list[str]]:

@@ -1,6 +1,6 @@
 """Joint rotation alignment by synchronization: stronger peers of the LH MRF solver on the same C_ij.
 
-Conventions as in corr_core.circular: C: (N, N, V) with C_ij(theta) = sum_v ||F_i[v] - F_j[(v+theta)%V]||^2,
+Conventions as in corr_core.alignment.pair_costs: C: (N, N, V) with C_ij(theta) = sum_v ||F_i[v] - F_j[(v+theta)%V]||^2,
 labels x in 0..V-1 with x_j - x_i ~= argmin_theta C_ij(theta) for consistent pairs; K_ij = exp(-C_ij/sigma).
 
 - ``spectral_sync``: angular synchronization (Singer 2011). H_ij = sum_theta K_ij(theta) exp(+i 2 pi theta/V)
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from corr_core.circular import CirculantPairwise, _symmetrize_costs, auto_sigma
+from corr_core.alignment.pair_costs import CirculantPairwise, _symmetrize_costs, auto_sigma
 
 __all__ = ["sync_matrix", "spectral_sync", "spectral_sync_operator", "round_phases", "projected_power"]
 

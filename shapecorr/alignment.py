@@ -13,13 +13,19 @@ import zipfile
 
 import numpy as np
 
-from corr_core import azimuth, circular, mrf, sync
-from corr_core.hog import draw_hog, hog_features
-from corr_core.meshio import MeshError, load_mesh, normalize_mesh, save_obj
-from corr_core.render import render_views, rotate_about_y
-from corr_core.views import load_view_stack
+from corr_core.alignment import azimuth
 
-from ..registry import register
+from corr_core.alignment import pair_costs as circular
+
+from corr_core import mrf
+
+from corr_core.alignment import sync
+from corr_core.alignment.hog import draw_hog, hog_features
+from corr_core.geometry.mesh_io import MeshError, load_mesh, normalize_mesh, save_obj
+from corr_core.alignment.render import render_views, rotate_about_y
+from corr_core.alignment.views import load_view_stack
+
+from stages.registry import register
 
 MESH_EXTENSIONS = (".obj", ".off", ".ply")
 

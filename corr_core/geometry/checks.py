@@ -10,7 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from corr_core.meshio import MeshError, check_mesh
+from corr_core.geometry.mesh_io import MeshError, check_mesh
 
 
 def _edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
