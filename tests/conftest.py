@@ -7,8 +7,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-COURSE_DATA = ROOT.parent / "shared" / "data" / "hw3"
+from tests.helpers import COURSE_DATA
 
 
 @pytest.fixture(scope="session")

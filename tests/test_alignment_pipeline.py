@@ -15,7 +15,7 @@ from corr_core.generate import write_chair_collection
 from stages import runner
 from stages.errors import PipelineError
 
-from conftest import COURSE_DATA
+from tests.helpers import COURSE_DATA
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -17,7 +17,7 @@ from corr_core.geometry.checks import check_correspondence_mesh
 from corr_core.geometry.mesh_io import load_mesh, save_obj
 from stages import runner
 
-from conftest import COURSE_DATA
+from tests.helpers import COURSE_DATA
 
 N_POSES = 3
 TESTS = [f"mesh{i:03d}" for i in range(1, N_POSES + 1)]

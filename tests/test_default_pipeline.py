@@ -7,7 +7,7 @@ import shutil
 from html.parser import HTMLParser
 from pathlib import Path
 
-from enginekit import ROOT, cli
+from tests.helpers import ROOT, cli
 
 from stages.runner import scalar_metrics
 

@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 from corr_core.correspondence.descriptors import descriptor_distance, hks, hks_times, normalize_columns, wks
 from corr_core.geometry.laplacian import eigenpairs, laplacian_and_mass
 from corr_core.correspondence.matching import hungarian_match
-from test_laplacian import sphere
+from tests.helpers import sphere
 
 
 def bumpy_blob(n=800, seed=3):

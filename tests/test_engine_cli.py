@@ -14,7 +14,7 @@ import pytest
 
 from stages import runner
 
-from enginekit import ROOT, SYNTHETIC_YAML, ExternalCluster, cli, make_project
+from tests.helpers import ROOT, SYNTHETIC_YAML, ExternalCluster, cli, make_project
 
 
 def _summary(path: Path) -> dict:

@@ -11,7 +11,7 @@ from stages import runner
 from stages.plan import make_blocks
 from stages.store import digest_json
 
-from enginekit import executed, make_project
+from tests.helpers import executed, make_project
 
 
 @pytest.fixture()

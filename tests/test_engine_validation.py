@@ -7,7 +7,7 @@ from stages.config import load_pipeline
 from stages.errors import PipelineError
 from stages.plan import build_plan
 
-from enginekit import SYNTHETIC_YAML, cli, make_project
+from tests.helpers import SYNTHETIC_YAML, cli, make_project
 
 CASES = {
     "unknown_function": (SYNTHETIC_YAML.replace("synthetic.summarize", "synthetic.summarise"),

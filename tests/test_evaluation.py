@@ -7,7 +7,7 @@ import pytest
 from corr_core.correspondence.measures import (accuracy, correspondence_matrix, frequency_matrix, geodesic_error_curve,
                                   geodesic_errors, plot_error_curves, plot_frequency_matrix, surface_area)
 from corr_core.correspondence.landmarks import read_landmarks
-from test_laplacian import sphere
+from tests.helpers import sphere
 
 
 def test_correspondence_and_frequency_matrices():

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from corr_core.geometry.geodesic import geodesic_diameter, geodesic_distances, landmark_geodesics
-from test_laplacian import sphere
+from tests.helpers import sphere
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,7 @@ import pytest
 from corr_core.correspondence.landmark_mrf import (chirality_agreement, consistency_pairwise, descriptor_unary,
                                     landmark_chirality, match_landmarks_mrf, match_landmarks_oriented,
                                     reliable_triples)
-from test_laplacian import sphere
+from tests.helpers import sphere
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared/data/hw3"
 

@@ -1,22 +1,9 @@
 """Cotan Laplacian and eigenpairs on a sampled unit sphere: eigenvalues l(l+1) with multiplicity 2l+1."""
 import numpy as np
 import pytest
-from scipy.spatial import ConvexHull
 
+from tests.helpers import sphere
 from corr_core.geometry.laplacian import eigenpairs, laplacian_and_mass
-
-
-def sphere(n=1500, seed=0):
-    """Unit sphere: Fibonacci points + convex hull, faces oriented outward. V: (n,3), F: (m,3)."""
-    i = np.arange(n) + 0.5
-    phi = np.arccos(1 - 2 * i / n)
-    theta = np.pi * (1 + 5**0.5) * i
-    V = np.c_[np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)]
-    F = ConvexHull(V).simplices
-    nrm = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    flip = np.einsum("ij,ij->i", nrm, V[F].mean(1)) < 0
-    F[flip] = F[flip][:, ::-1]
-    return V, F
 
 
 def test_laplacian_is_psd_with_constant_kernel_and_mass_is_area():

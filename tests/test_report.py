@@ -15,7 +15,7 @@ from html.parser import HTMLParser
 import numpy as np
 import pytest
 
-from enginekit import ROOT, SYNTHETIC_YAML, cli, make_project
+from tests.helpers import ROOT, SYNTHETIC_YAML, cli, make_project
 from stages import runner
 from stages.report import render_value, write_report
 

@@ -8,7 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from enginekit import ExternalCluster
+from tests.helpers import ExternalCluster
 
 ROOT = Path(__file__).resolve().parents[1]
 PIPELINE = ROOT / "pipelines" / "scale.yaml"

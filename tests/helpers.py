@@ -8,6 +8,7 @@ import textwrap
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+COURSE_DATA = ROOT.parent / "shared" / "data" / "hw3"
 
 SYNTHETIC_YAML = """\
 name: syn
@@ -112,3 +113,19 @@ class ExternalCluster:
             p.terminate()
         for p in self.procs:
             p.wait(timeout=30)
+
+
+def sphere(n=1500, seed=0):
+    """Unit sphere: Fibonacci points + convex hull, faces oriented outward. V: (n,3), F: (m,3)."""
+    import numpy as np
+    from scipy.spatial import ConvexHull
+
+    i = np.arange(n) + 0.5
+    phi = np.arccos(1 - 2 * i / n)
+    theta = np.pi * (1 + 5**0.5) * i
+    V = np.c_[np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)]
+    F = ConvexHull(V).simplices
+    nrm = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    flip = np.einsum("ij,ij->i", nrm, V[F].mean(1)) < 0
+    F[flip] = F[flip][:, ::-1]
+    return V, F
