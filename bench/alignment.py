@@ -26,8 +26,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from corr_core.alignment.pair_costs import (CirculantPairwise, auto_sigma, dense_pairwise, pair_costs,  # noqa: E402
-                                pair_costs_flops, pair_costs_naive, uniform_unary)
+from corr_core.alignment.circulant import CirculantPairwise, dense_pairwise  # noqa: E402
+from corr_core.alignment.pair_costs import auto_sigma, pair_costs, pair_costs_flops, pair_costs_naive  # noqa: E402
+from corr_core.alignment.solvers import uniform_unary  # noqa: E402
 from corr_core.mrf import solve_lh  # noqa: E402
 
 

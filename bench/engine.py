@@ -19,9 +19,15 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# the synthetic.* functions are the test-only plugin, loaded through the STAGES_PLUGINS development hook
+# (the LocalCluster's workers inherit the variable)
+SYNTHETIC_PLUGIN = "tests.stages.synthetic_plugin"
+os.environ["STAGES_PLUGINS"] = ",".join(filter(None, [os.environ.get("STAGES_PLUGINS"), SYNTHETIC_PLUGIN]))
+os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, [str(Path(__file__).resolve().parents[1]),
+                                                         os.environ.get("PYTHONPATH")]))
 
-from stages import runner  # noqa: E402
-from shapecorr import synthetic  # noqa: E402
+from stages import api  # noqa: E402
+from tests.stages import synthetic_plugin as synthetic  # noqa: E402
 
 YAML = """\
 name: bench
@@ -70,26 +76,26 @@ def main() -> None:
         print(f"plain loop (1 process, all N*N pairs)   {loop:8.2f} s")
 
         t0 = time.perf_counter()
-        s = runner.run("p.yaml", sets, workers=0, quiet=True, cache_dir="cache-inproc")
+        s = api.run("p.yaml", sets, workers=0, quiet=True, cache_dir="cache-inproc")
         inproc = time.perf_counter() - t0
         tasks = sum(v["tasks"] for v in s["stages"].values())
         print(f"engine, in-process, cold ({tasks} tasks) {inproc:8.2f} s   overhead vs loop {inproc / loop - 1:+.1%}"
               f"  (target <= +20%)")
 
-        with runner.client_session(2, None, str(work / "cache")) as get_client:
+        with api.client_session(2, None, str(work / "cache")) as get_client:
             client = get_client()
             t0 = time.perf_counter()
-            runner.run("p.yaml", sets, quiet=True, client_getter=lambda: client)
+            api.run("p.yaml", sets, quiet=True, client_getter=lambda: client)
             cold = time.perf_counter() - t0
             t0 = time.perf_counter()
-            s = runner.run("p.yaml", sets, quiet=True, client_getter=lambda: client)
+            s = api.run("p.yaml", sets, quiet=True, client_getter=lambda: client)
             noop = time.perf_counter() - t0
         assert sum(v["executed"] for v in s["stages"].values()) == 0
         print(f"engine, LocalCluster 2 workers, cold     {cold:8.2f} s   vs plain loop {cold / loop:.2f}x time")
         print(f"no-op rerun (plan + cache check)         {noop:8.3f} s   no-op / cold = {noop / cold:.4f}"
               f"  (target <= 0.05)")
         t0 = time.perf_counter()
-        runner.run("p.yaml", sets, workers=2, quiet=True)
+        api.run("p.yaml", sets, workers=2, quiet=True)
         noop_fresh = time.perf_counter() - t0
         print(f"no-op rerun without a running cluster    {noop_fresh:8.3f} s   (no cluster is started for a no-op)")
     finally:

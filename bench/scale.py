@@ -16,7 +16,7 @@ slopes over the sizes. No assertions: this prints a table (and writes --json if 
 
 ``--n 5000``: rendering 5,000 chairs takes too long on the shared 2-core machine, so C is synthesized: planted
 rotations of one random base feature plus noise (D=128 features), computed tile by tile with
-``circular.pair_costs`` into one (N, N, V) float32 array (the layout the engine's pair stage assembles),
+``pair_costs.pair_costs`` into one (N, N, V) float32 array (the layout the engine's pair stage assembles),
 then the solve stage's work (auto sigma, kNN graph, operator, spectral sync / LH, energy) in a fresh process
 per configuration; peak RSS is ru_maxrss of that process (includes C).
 """
@@ -146,21 +146,21 @@ def synth_features(n: int, V: int = 16, D: int = 128, noise: float = 0.6, seed: 
 
 
 def synth_costs(n: int, path: Path, tile: int = 500) -> dict:
-    """Synthesize C (n, n, V) float32 tile by tile with circular.pair_costs (upper tiles + mirror, like the
+    """Synthesize C (n, n, V) float32 tile by tile with pair_costs.pair_costs (upper tiles + mirror, like the
     engine's pair stage) and save it with the planted offsets; returns timing and peak RSS of this process."""
     import resource
 
-    from corr_core.alignment import pair_costs as circular
+    from corr_core.alignment import pair_costs
 
     t0 = time.time()
     F, offsets = synth_features(n)
     C = np.empty((n, n, F.shape[1]), dtype=np.float32)
     for a in range(0, n, tile):
         for b in range(a, n, tile):
-            block = circular.pair_costs(F[a:a + tile], F[b:b + tile])
+            block = pair_costs.pair_costs(F[a:a + tile], F[b:b + tile])
             C[a:a + tile, b:b + tile] = block
             if b != a:
-                C[b:b + tile, a:a + tile] = circular.mirror_pair_costs(block)
+                C[b:b + tile, a:a + tile] = pair_costs.mirror_pair_costs(block)
     seconds = time.time() - t0
     np.save(path, C)
     np.save(str(path) + ".offsets.npy", offsets)
@@ -173,25 +173,21 @@ def _child_mrf(path: str, solver: str, knn: int) -> dict:
     kNN graph, operator, spectral sync or LH, energy); report times and ru_maxrss (C included)."""
     import resource
 
-    from corr_core.alignment import azimuth
-
-    from corr_core.alignment import pair_costs as circular
-
     from corr_core import mrf
-
-    from corr_core.alignment import sync
+    from corr_core.alignment import azimuth, solvers, sync
+    from corr_core.alignment.circulant import CirculantPairwise
 
     C = np.load(path)
     offsets = np.load(path + ".offsets.npy")
     n, V = C.shape[0], C.shape[2]
     rss_after_c = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     t0 = time.time()
-    sigma = circular.auto_sigma(C)
-    neighbors = circular.nearest_shapes(C, knn) if knn else None
-    op = circular.CirculantPairwise(C, sigma, neighbors)
+    sigma = solvers.choose_sigma(C)
+    neighbors = solvers.knn_neighbors(C, knn)
+    op = CirculantPairwise(C, sigma, neighbors)
     t_op = time.time() - t0
     t0 = time.time()
-    unary = circular.uniform_unary(n, V, 0)
+    unary = solvers.uniform_unary(n, V, 0)
     if solver == "spectral":
         labels = sync.spectral_sync_operator(op)
     else:

@@ -14,7 +14,7 @@ Pairwise operator protocol (anything with these members works with every solver 
 - ``column(j, b) -> (n,L)``: W[:, j, :, b], the change of every node's local gains when node j takes label b.
 - optional ``block_max() -> (n,n)``: max_{a,b} W[i,j,a,b] (used for the trivial upper bound).
 
-``DensePairwise`` stores W explicitly; ``corr_core.alignment.pair_costs.CirculantPairwise`` implements the same protocol
+``DensePairwise`` stores W explicitly; ``corr_core.alignment.circulant.CirculantPairwise`` implements the same protocol
 with FFTs for the rotation-alignment problem.
 
 Solver (``solve_lh``), after Leordeanu & Hebert, "Efficient MAP approximation for dense energy functions",

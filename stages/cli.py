@@ -6,14 +6,39 @@ import json
 import os
 import sys
 
-from .errors import PipelineError
+from .errors import PipelineError, UserError
 
-EPILOG = """examples:
+MAX_WORKERS = 4 * (os.cpu_count() or 1)
+
+EPILOG = """examples (each is run by tests/stages/test_help_examples.py):
   python -m stages run pipeline.yaml
   python -m stages run pipeline.yaml --set mrf.sigma=0.5 --dry-run     # what would rerun, and why
-  python -m stages sweep pipeline.yaml --grid align_mrf.sigma_scale=0.5,1,2
+  python -m stages sweep pipeline.yaml --grid align.sigma_scale=0.5,1,2
   python -m stages results pipeline.yaml --json
 """
+
+
+def _workers(text: str) -> int:
+    """--workers: an int in 0..MAX_WORKERS (more processes than that only compete for the cores)."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
+    if not 0 <= n <= MAX_WORKERS:
+        raise argparse.ArgumentTypeError(
+            f"{n} is out of range: use 0 (run in this process) to {MAX_WORKERS} (4 per CPU core); "
+            "for more, start a dask cluster and pass --scheduler")
+    return n
+
+
+def _output_file(example: str):
+    """An argparse type for a file to write (--summary-json, report --out): not an existing folder."""
+    def check(text: str) -> str:
+        if os.path.isdir(text) or text.endswith(("/", os.sep)):
+            raise argparse.ArgumentTypeError(f"'{text}' is a folder; give a file name, e.g. "
+                                             f"{os.path.join(text, example)}")
+        return text
+    return check
 
 
 def _common(p: argparse.ArgumentParser, sets: bool = True) -> None:
@@ -34,14 +59,14 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Run a pipeline: compute the cache misses under dask, publish outputs.")
     _common(p)
     p.add_argument("--dry-run", action="store_true", help="list what would execute and why; run nothing")
-    p.add_argument("--workers", type=int, default=2,
-                   help="local worker processes (default 2); 0 runs in this process without dask")
+    p.add_argument("--workers", type=_workers, default=2,
+                   help=f"local worker processes, 0..{MAX_WORKERS} (default 2); 0 runs in this process without dask")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="a dask.distributed scheduler address, e.g. tcp://10.0.0.5:8786")
     p.add_argument("--out", default=None, help="output folder (default: the pipeline's 'output:')")
-    p.add_argument("--summary-json", default=None, metavar="PATH",
+    p.add_argument("--summary-json", default=None, metavar="PATH", type=_output_file("summary.json"),
                    help="write per-stage tasks executed / cached / seconds as JSON")
-    p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.add_argument("--quiet", action="store_true", help="no progress output (failures are still printed)")
 
     p = sub.add_parser("status", help="per stage: tasks cached and to run, with reasons",
                        description="Show what is cached and what a run would execute, and why.")
@@ -53,10 +78,17 @@ def build_parser() -> argparse.ArgumentParser:
     _common(p)
     p.add_argument("--grid", action="append", required=True, metavar="KEY=V1,V2,...",
                    help="a grid axis; repeat for a product of axes")
-    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--workers", type=_workers, default=2, help=f"local worker processes, 0..{MAX_WORKERS}")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--dry-run", action="store_true",
+                   help="check every grid point and list what each would run; run nothing")
+    p.add_argument("--metrics", default=None, metavar="A,B,...",
+                   help="the metric columns printed (dotted keys or patterns such as 'accuracy.*'; default: the "
+                        "headline measures)")
+    p.add_argument("--csv", default=None, metavar="PATH",
+                   help="also write the full table (every scalar metric) to PATH (.json: JSON)")
+    p.add_argument("--quiet", action="store_true", help="no progress output (failures are still printed)")
 
     p = sub.add_parser("results", help="print the final metrics of a configuration",
                        description="Print the metrics of a configuration (from the cache; runs nothing).")
@@ -74,7 +106,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("report", help="write a self-contained HTML report of a pipeline's results",
                        description="Write one self-contained HTML file: figures, metrics, sweeps, provenance.")
     _common(p)
-    p.add_argument("--out", default=None, metavar="FILE", help="the HTML file (default: OUTPUT/report.html)")
+    p.add_argument("--out", default=None, metavar="FILE", type=_output_file("report.html"),
+                   help="the HTML file (default: OUTPUT/report.html)")
+    p.add_argument("--results", default=None, metavar="OUTPUT",
+                   help="the output folder whose published figures the report shows (as given to run --out; "
+                        "default: the pipeline's output:)")
 
     p = sub.add_parser("functions", help="list the functions a pipeline may name",
                        description="List registered stage functions with their inputs and parameters.")
@@ -89,6 +125,9 @@ def main(argv=None) -> int:
     except PipelineError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except UserError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     except BrokenPipeError:  # output piped into `head` and closed early
         try:
             sys.stdout = open(os.devnull, "w")
@@ -98,17 +137,24 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("interrupted: everything finished so far is kept in the cache; run again to resume", file=sys.stderr)
         return 130
+    except OSError as exc:  # a folder that cannot be written, a disk that is full, ...
+        where = f" {exc.filename}" if exc.filename else ""
+        print(f"error: cannot access{where}: {exc.strerror or exc}\n  fix: check the path, its permissions and "
+              "free space (every finished result is kept in the cache)", file=sys.stderr)
+        return 1
 
 
 def _dispatch(args) -> int:
-    from . import runner
+    from . import api
 
     if args.command == "run":
         try:
-            summary = runner.run(args.pipeline, args.sets, workers=args.workers, scheduler=args.scheduler,
+            summary = api.run(args.pipeline, args.sets, workers=args.workers, scheduler=args.scheduler,
                                  dry=args.dry_run, cache_dir=args.cache, output_dir=args.out, quiet=args.quiet,
                                  summary_json=args.summary_json)
-        except runner.RunFailed as exc:
+        except api.RunFailed as exc:
+            if not args.quiet:
+                _print_summary(exc.summary)
             print(f"error: {len(exc.summary['failures'])} task(s) failed; the rest is stored. "
                   "Fix the inputs and run again: only what is missing will run.", file=sys.stderr)
             return 1
@@ -116,40 +162,57 @@ def _dispatch(args) -> int:
             _print_summary(summary)
         return 0
     if args.command == "status":
-        rows = runner.status(args.pipeline, args.sets, args.cache)
+        rows = api.status(args.pipeline, args.sets, args.cache)
         if args.json:
             print(json.dumps(rows, indent=2))
         else:
             for r in rows:
+                if r.get("skipped"):
+                    print(f"{r['stage']:<20} {r['fanout']:<5} skipped: {r['skipped']}")
+                    continue
                 print(f"{r['stage']:<20} {r['fanout']:<5} {r['cached']:>6}/{r['tasks']:<6} cached"
-                      f"   {r['to_run']} to run" + (f": {'; '.join(r['reasons'])[:200]}" if r["reasons"] else ""))
+                      f"   {'?' if r['to_run'] is None else r['to_run']} to run" + (f": {'; '.join(r['reasons'])[:200]}" if r["reasons"] else ""))
         return 0
     if args.command == "sweep":
-        result = runner.sweep(args.pipeline, args.grid, args.sets, workers=args.workers, scheduler=args.scheduler,
-                              cache_dir=args.cache, quiet=args.quiet)
+        result = api.sweep(args.pipeline, args.grid, args.sets, workers=args.workers, scheduler=args.scheduler,
+                           cache_dir=args.cache, quiet=args.quiet, dry=args.dry_run,
+                           metric_keys=[m.strip() for m in args.metrics.split(",") if m.strip()] if args.metrics else None)
+        if args.dry_run:
+            for row in result["dry_run"]:
+                point = " ".join(f"{k}={v}" for k, v in row["point"].items())
+                print(f"== {point}: {row['to_run']} task(s) would run")
+                print("\n".join("   " + line for line in row["report"].splitlines()))
+            return 0
         if args.json:
             print(json.dumps(result, indent=2, default=str))
         else:
-            print(runner.format_table(result["rows"]))
+            print(api.format_table(result["rows"], result.get("headline")))
             if result.get("figure"):
                 print(f"figure: {result['figure']}")
+        if args.csv:
+            print(f"table: {api.write_table(result['rows'], args.csv)}")
         for f in result["failures"]:
             print(f"FAILED {f['stage']}[{f['item']}]: {f['error']}", file=sys.stderr)
         return 1 if result["failures"] else 0
     if args.command == "results":
-        plan = runner.plan_pipeline(args.pipeline, args.sets, args.cache, None, quiet=True)
-        m = runner.metrics(plan)
+        plan = api.plan_pipeline(args.pipeline, args.sets, args.cache, None, quiet=True)
+        m = api.metrics(plan)
         if args.json:
             print(json.dumps(m, indent=2, default=str))
         else:
             if "_not_computed" in m:
                 print(f"not computed yet: {', '.join(m['_not_computed'])} (run: python -m stages run "
                       f"{args.pipeline})")
-            for k, v in runner.scalar_metrics(m).items():
+            for stage, why in m.get("_skipped", {}).items():
+                print(f"skipped: {stage} ({why})")
+            for stage, items in m.get("_left_out", {}).items():
+                print(f"{stage} left out {len(items)} failed item(s): "
+                      + "; ".join(f"{x['item']}: {x['why']}" for x in items)[:500])
+            for k, v in api.scalar_metrics(m).items():
                 print(f"{k:<40} {v:.4g}" if isinstance(v, float) else f"{k:<40} {v}")
         return 0 if "_not_computed" not in m else 3
     if args.command == "gc":
-        res = runner.gc(args.pipelines, args.cache, dry=args.dry_run, keep_sweeps=not args.no_keep_sweeps)
+        res = api.gc(args.pipelines, args.cache, dry=args.dry_run, keep_sweeps=not args.no_keep_sweeps)
         verb = "would remove" if res["dry_run"] else "removed"
         print(f"{verb} {res['removed']} entr{'y' if res['removed'] == 1 else 'ies'} and "
               f"{res['generated_removed']} generated dataset(s), {res['bytes_freed'] / 2**20:.1f} MiB; "
@@ -158,7 +221,7 @@ def _dispatch(args) -> int:
     if args.command == "report":
         from .report import write_report
 
-        path = write_report(args.pipeline, args.sets, cache_dir=args.cache, out=args.out)
+        path = write_report(args.pipeline, args.sets, cache_dir=args.cache, out=args.out, output_dir=args.results)
         print(path)
         return 0
     if args.command == "functions":
@@ -185,5 +248,6 @@ def _dispatch(args) -> int:
 def _print_summary(summary: dict) -> None:
     print(f"{'stage':<22}{'tasks':>7}{'run':>7}{'cached':>8}{'failed':>8}{'seconds':>10}")
     for name, s in summary["stages"].items():
-        print(f"{name:<22}{s['tasks']:>7}{s['executed']:>7}{s['cached']:>8}{s['failed']:>8}{s['seconds']:>10.2f}")
+        print(f"{name:<22}{s['tasks']:>7}{s['executed']:>7}{s['cached']:>8}{s['failed']:>8}{s['seconds']:>10.2f}"
+              + (f"   skipped: {s['skipped_stage']}" if s.get("skipped_stage") else ""))
     print(f"done in {summary['wall_seconds']:.1f}s; {summary['published']} file(s) published")

@@ -27,7 +27,7 @@ from typing import Any
 import yaml
 
 from . import registry
-from .errors import PipelineError
+from .errors import PipelineError, warn_once
 
 TOP_KEYS = {"name", "description", "cache", "output", "params", "generated", "datasets", "stages"}
 STAGE_KEYS = {"function", "foreach", "pairs", "tile", "inputs", "params", "metrics", "description"}
@@ -89,16 +89,91 @@ class Pipeline:
     overrides: list[str] = field(default_factory=list)
 
 
+ALIAS_BUDGET = 10_000  # YAML nodes that aliases may add in total once expanded
+
+
+class YAMLRefused(yaml.MarkedYAMLError):
+    """Valid YAML that a pipeline file may not contain (its message says what to do instead)."""
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses duplicate keys, recursive aliases and aliases that expand to more than
+    ALIAS_BUDGET nodes (a 1 KB "billion laughs" file would otherwise expand to gigabytes)."""
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self._open_anchors: set[str] = set()
+        self._alias_nodes = 0
+        self._sizes: dict[int, int] = {}
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            if event.anchor in self._open_anchors:
+                raise YAMLRefused(
+                    None, None, f"alias *{event.anchor} refers to a node that contains it (a recursive structure)",
+                    event.start_mark)
+            if event.anchor in self.anchors:
+                self._alias_nodes += self._size(self.anchors[event.anchor])
+                if self._alias_nodes > ALIAS_BUDGET:
+                    raise YAMLRefused(
+                        None, None, f"aliases expand to more than {ALIAS_BUDGET} values; write the values out or use "
+                        "${...} references instead of nested aliases", event.start_mark)
+            return super().compose_node(parent, index)
+        event = self.peek_event()
+        anchor = getattr(event, "anchor", None)
+        if anchor is not None:
+            self._open_anchors.add(anchor)
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._open_anchors.discard(anchor)
+
+    def _size(self, node) -> int:
+        """Number of nodes of ``node`` with aliases expanded (memoized per node)."""
+        if id(node) not in self._sizes:
+            if isinstance(node, yaml.MappingNode):
+                n = 1 + sum(self._size(k) + self._size(v) for k, v in node.value)
+            elif isinstance(node, yaml.SequenceNode):
+                n = 1 + sum(self._size(v) for v in node.value)
+            else:
+                n = 1
+            self._sizes[id(node)] = n
+        return self._sizes[id(node)]
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            first: dict = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge" or not isinstance(key_node, yaml.ScalarNode):
+                    continue
+                key = self.construct_object(key_node)
+                if key in first:
+                    raise YAMLRefused(
+                        None, None, f"duplicate key '{key}' (first at line {first[key].line + 1}, again at line "
+                        f"{key_node.start_mark.line + 1}); keep one of them", key_node.start_mark)
+                first[key] = key_node.start_mark
+        return super().construct_mapping(node, deep=deep)
+
+
+def parse_yaml(text: str) -> tuple[Any, "_Lines"]:
+    """(the document's value, the line numbers of its keys); raises yaml.YAMLError (see _StrictLoader)."""
+    loader = _StrictLoader(text)
+    try:
+        node = loader.get_single_node()
+        value = loader.construct_document(node) if node is not None else None
+    finally:
+        loader.dispose()
+    return value, _Lines(node)
+
+
 class _Lines:
     """Line numbers of keys in a YAML document: ``lines[("stages","mrf","params")] -> 12``."""
 
-    def __init__(self, text: str):
+    def __init__(self, node):
         self.lines: dict[tuple, int] = {}
-        try:
-            node = yaml.compose(text, Loader=yaml.SafeLoader)
-        except yaml.YAMLError:
-            return
-        self._walk(node, ())
+        if node is not None:
+            self._walk(node, ())
 
     def _walk(self, node, path):
         if isinstance(node, yaml.MappingNode):
@@ -136,18 +211,15 @@ def load_pipeline(path: str, overrides: list[str] | tuple = (), cache_dir: str |
         PipelineError: naming the file, key, line and a fix.
     """
     registry.load_library()
-    if not os.path.isfile(path):
-        raise PipelineError("pipeline file not found", file=path, fix="check the path (relative to the current folder)")
-    with open(path, encoding="utf-8") as fh:
-        text = fh.read()
+    text = _read_text(path)
     try:
-        raw = yaml.safe_load(text)
+        raw, lines = parse_yaml(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         raise PipelineError(f"invalid YAML: {getattr(exc, 'problem', exc)}", file=path,
                             line=mark.line + 1 if mark else None,
-                            fix="fix the YAML syntax (indentation, colons, quotes)") from None
-    lines = _Lines(text)
+                            fix=None if isinstance(exc, YAMLRefused)
+                            else "fix the YAML syntax (indentation, colons, quotes)") from None
     if not isinstance(raw, dict):
         raise PipelineError("a pipeline file must be a mapping with 'stages:'", file=path)
     raw = copy.deepcopy(raw)
@@ -165,6 +237,10 @@ def load_pipeline(path: str, overrides: list[str] | tuple = (), cache_dir: str |
             raise err(f"'{section}' must be a mapping", section)
     if not raw["stages"]:
         raise err("the pipeline has no stages", "stages", fix="add a 'stages:' mapping")
+    for section in ("stages", "datasets", "generated"):
+        for key in raw[section]:
+            _check_name(key, err, (section, key), what={"stages": "a stage", "datasets": "a dataset",
+                                                        "generated": "a generated dataset"}[section])
     for name, st in raw["stages"].items():
         if not isinstance(st, dict):
             raise err("a stage must be a mapping with at least 'function:'", "stages", name)
@@ -173,7 +249,13 @@ def load_pipeline(path: str, overrides: list[str] | tuple = (), cache_dir: str |
             st["params"] = {}
     _apply_overrides(raw, overrides, path, err)
 
-    name = str(raw.get("name") or os.path.splitext(os.path.basename(path))[0])
+    for key in ("cache", "output", "name"):
+        if raw.get(key) is not None and not isinstance(raw[key], str):
+            raise err(f"'{key}' must be a string", key)
+    if raw.get("name"):
+        name = _check_name(raw["name"], err, ("name",), what="the pipeline")
+    else:  # from the file name, made a plain identifier
+        name = re.sub(r"[^A-Za-z0-9_\-]", "_", os.path.splitext(os.path.basename(path))[0]).lstrip("-") or "pipeline"
     pipe = Pipeline(file=os.path.abspath(path), name=name,
                     cache_dir=os.path.abspath(cache_dir or raw.get("cache") or "cache"),
                     output_dir=os.path.abspath(output_dir or raw.get("output") or os.path.join("results", name)),
@@ -184,6 +266,42 @@ def load_pipeline(path: str, overrides: list[str] | tuple = (), cache_dir: str |
     pipe.datasets = _read_datasets(raw, resolver, err)
     pipe.stages = _read_stages(raw, pipe, resolver, err)
     return pipe
+
+
+MAX_PIPELINE_BYTES = 4 * 2**20
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
+
+
+def _check_name(name: Any, err, where: tuple, what: str) -> str:
+    """``name`` if it is a plain identifier (letters, digits, '_' and '-', not starting with a digit or '-'):
+    names become file and folder names under the output folder and the cache, so no '/', '..' or spaces."""
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise err(f"{what} name {name!r} is not a plain identifier", *where,
+                  fix="use letters, digits, '_' and '-' only (e.g. align_export); names become folder names")
+    return name
+
+
+def _read_text(path: str) -> str:
+    """The pipeline file as text; PipelineError when it is missing, unreadable, huge or not UTF-8 text."""
+    if not os.path.isfile(path):
+        raise PipelineError("pipeline file not found", file=path, fix="check the path (relative to the current folder)")
+    try:
+        if os.path.getsize(path) > MAX_PIPELINE_BYTES:
+            raise PipelineError(f"the file is larger than {MAX_PIPELINE_BYTES // 2**20} MiB: not a pipeline file",
+                                file=path, fix="pass the pipeline's YAML file")
+        with open(path, "rb") as fh:
+            data = fh.read()
+    except OSError as exc:
+        raise PipelineError(f"cannot read the file: {exc.strerror or exc}", file=path,
+                            fix="check the path and its permissions") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        text = None
+    if text is None or "\x00" in text:
+        raise PipelineError("not a text file (a pipeline file is YAML text in UTF-8)", file=path,
+                            fix="pass the pipeline's YAML file, e.g. pipeline.yaml") from None
+    return text
 
 
 def _apply_overrides(raw: dict, overrides, path, err) -> None:
@@ -259,17 +377,54 @@ class _Resolver:
             if m:
                 return self.lookup(m.group(1).strip(), where, seen)
             if _REF.search(value):
-                return _REF.sub(lambda mm: str(self.lookup(mm.group(1).strip(), where, seen)), value)
+                return self._interpolate(value, where, seen)
         return value
+
+    def _interpolate(self, value: str, where: tuple, seen: tuple) -> Any:
+        """A string with ``${...}`` inside: references replaced by their text. A generated dataset's folder
+        may only start the string (``${generated.X}/sub/*.obj``); the result is then a GeneratedPath."""
+        head: GeneratedPath | None = None
+        text, pos = [], 0
+        for mm in _REF.finditer(value):
+            got = self.lookup(mm.group(1).strip(), where, seen)
+            text.append(value[pos:mm.start()])
+            pos = mm.end()
+            if isinstance(got, GeneratedPath):
+                if mm.start() != 0:
+                    raise self.err(f"'{value}': a generated dataset's folder can only start a path", *where,
+                                   fix="write it as '${generated.NAME}/sub/path'")
+                head = got
+            else:
+                text.append(str(got))
+        text.append(value[pos:])
+        rest = "".join(text)
+        return head.joined(rest) if head is not None else rest
 
 
 class GeneratedPath(str):
-    """Placeholder for the folder of a generated dataset; replaced by the planner."""
+    """A path inside the folder of a generated dataset (``cache/generated/<key>``, known to the planner only):
+    the dataset's name and the path ``rest`` below its folder ("" for the folder itself). As text it reads
+    ``@generated/<name>/<rest>`` (what messages show)."""
 
-    def __new__(cls, name: str):
-        obj = super().__new__(cls, f"@generated/{name}")
-        obj.generated_name = name
+    generated_name: str
+    rest: str
+
+    def __new__(cls, name: str, rest: str = ""):
+        rest = rest.lstrip("/")
+        obj = super().__new__(cls, f"@generated/{name}" + (f"/{rest}" if rest else ""))
+        obj.generated_name, obj.rest = name, rest
         return obj
+
+    def __getnewargs__(self):  # copy/pickle rebuild from (name, rest), not from the text
+        return self.generated_name, self.rest
+
+    def joined(self, suffix: str) -> "GeneratedPath":
+        """This path with ``suffix`` appended as text: ``(chairs, "")`` + ``"/*"`` -> ``(chairs, "*")``."""
+        return GeneratedPath(self.generated_name, self.rest + suffix)
+
+    def under(self, folder: str) -> str:
+        """The real path once the dataset's folder is known."""
+        return os.path.join(folder, self.rest) if self.rest else folder
 
 
 def _read_generated(raw: dict, err, resolver: "_Resolver") -> dict[str, GeneratedSpec]:
@@ -288,7 +443,9 @@ def _read_generated(raw: dict, err, resolver: "_Resolver") -> dict[str, Generate
             if not registry.check_type(v, registry.get(gen).params[k].annotation):
                 raise err(f"parameter '{k}' = {v!r} has the wrong type", "generated", name, "params", k)
             params[k] = registry.coerce(v, registry.get(gen).params[k].annotation)
-        out[name] = GeneratedSpec(name, gen, _fill_defaults(registry.get(gen), params))
+        params = _fill_defaults(registry.get(gen), params)
+        _validate_params(registry.get(gen), params, err, ("generated", name, "params"))
+        out[name] = GeneratedSpec(name, gen, params)
     return out
 
 
@@ -308,10 +465,13 @@ def _read_datasets(raw: dict, resolver: _Resolver, err) -> dict[str, DatasetSpec
         value = resolver.resolve(spec[kind], ("datasets", name, kind))
         if not isinstance(value, str):
             raise err(f"'{kind}' must be a path string", "datasets", name, kind)
-        gen = None
-        m = re.match(r"^@generated/([^/]+)", value)
-        if m:
-            gen = m.group(1)
+        empty = _empty_references(spec[kind], resolver, ("datasets", name, kind))
+        if empty:
+            if not spec.get("optional", False):
+                raise err(f"'{kind}' uses {', '.join('${' + r + '}' for r in empty)}, which is empty",
+                          "datasets", name, kind, fix=f"set it, e.g. --set {empty[0]}=FOLDER")
+            value = ""  # an optional dataset that is not given: the stages that need it are skipped
+        gen = value.generated_name if isinstance(value, GeneratedPath) else None
         pattern = spec.get("pattern")
         if kind == "groups":
             if not pattern or "(?P<item>" not in pattern:
@@ -324,6 +484,14 @@ def _read_datasets(raw: dict, resolver: _Resolver, err) -> dict[str, DatasetSpec
                 raise err(f"invalid regular expression: {exc}", "datasets", name, "pattern") from None
         out[name] = DatasetSpec(name, kind, value, pattern, bool(spec.get("optional", False)), gen)
     return out
+
+
+def _empty_references(text: Any, resolver: "_Resolver", where: tuple) -> list[str]:
+    """The ``${...}`` references in ``text`` whose value is empty ("" or null)."""
+    if not isinstance(text, str):
+        return []
+    refs = [m.strip() for m in _REF.findall(text)]
+    return [r for r in refs if not r.startswith("generated.") and resolver.lookup(r, where) in ("", None)]
 
 
 def _parse_input(text: Any, err, where) -> InputRef:
@@ -345,6 +513,22 @@ def _check_params(fn: registry.StageFunction, params: dict, err, where: tuple) -
         if k not in params and spec.required:
             raise err(f"missing required parameter '{k}' of function '{fn.name}'", *where,
                       fix=f"add '{k}:' under {'.'.join(map(str, where))}")
+
+
+def _validate_params(fn: registry.StageFunction, params: dict, err, where: tuple) -> None:
+    """Run the function's own check of its params (``register(validate=...)``): ValueError -> PipelineError;
+    returned strings are printed as warnings naming the stage."""
+    check = getattr(fn, "validate", None)
+    if check is None:
+        return
+    if any(isinstance(v, GeneratedPath) for v in params.values()):
+        return  # paths are filled in by the planner; the function checks them when it runs
+    try:
+        warnings = check(**params) or []
+    except (ValueError, TypeError) as exc:
+        raise err(str(exc), *where, fix=f"change the value under {'.'.join(map(str, where))} (or the --set)") from None
+    for w in warnings:
+        warn_once(f"{'.'.join(map(str, where))}: {w}")
 
 
 def _fill_defaults(fn: registry.StageFunction, params: dict) -> dict:
@@ -413,6 +597,7 @@ def _read_stages(raw: dict, pipe: Pipeline, resolver: _Resolver, err) -> dict[st
                 raise err(f"parameter '{k}' = {v!r} has the wrong type; '{fname}' expects "
                           f"{registry.describe_type(fn.params[k].annotation)}", "stages", name, "params", k)
             params[k] = registry.coerce(v, fn.params[k].annotation)
+        _validate_params(fn, params, err, ("stages", name, "params"))
         tile = resolver.resolve(st.get("tile", 32), ("stages", name, "tile"))
         if not isinstance(tile, int) or isinstance(tile, bool) or tile < 1:
             raise err("'tile' must be a positive integer", "stages", name, "tile")

@@ -7,33 +7,41 @@ again, with a warning.
 from __future__ import annotations
 
 import os
+import re
 import shutil
+import signal
 import sys
+import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
+from .errors import UserError
 from .plan import Plan, Task
 from .store import Store
-from .worker import run_task
+from .worker import TaskCall, TaskResult, TaskStatus, run_task
 
 
 @dataclass
 class Outcome:
     """What happened to the tasks of a run, per stage."""
-    results: dict[str, dict] = field(default_factory=dict)   # key -> status dict
+    results: dict[str, TaskResult] = field(default_factory=dict)   # key -> result
     wall_seconds: float = 0.0
 
-    def failed(self) -> list[dict]:
-        return [r for r in self.results.values() if r["status"] in ("failed",)]
+    def with_status(self, status: TaskStatus) -> list[TaskResult]:
+        return [r for r in self.results.values() if r.status is status]
 
-    def corrupt(self) -> list[dict]:
-        return [r for r in self.results.values() if r["status"] == "corrupt"]
+    def failed(self) -> list[TaskResult]:
+        return self.with_status(TaskStatus.FAILED)
+
+    def corrupt(self) -> list[TaskResult]:
+        return self.with_status(TaskStatus.CORRUPT)
 
 
-def task_spec(task: Task, store: Store) -> dict:
-    return {"key": task.key, "stage": task.stage, "label": task.label, "function": task.function,
-            "params": task.params, "inputs": task.inputs, "item_name": task.item_name,
-            "cache": store.root, "display": task.display}
+def task_call(task: Task, store: Store) -> TaskCall:
+    """What a worker needs to run ``task`` against ``store``."""
+    return TaskCall(task.key, task.stage, task.label, task.function, task.params, task.inputs, task.item_name,
+                    store.root, task.display)
 
 
 class Progress:
@@ -46,9 +54,22 @@ class Progress:
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
         self.last_pct = {s: -1 for s in totals}
         self.t0 = self.last_print = time.time()
+        self.first_done: dict[str, float] = {}   # stage -> time its first task finished (for the estimate)
+
+    def eta(self, stage: str, now: float | None = None) -> str:
+        """`` ~12s left`` for a stage with at least 2 tasks done and some left (rate measured from its first
+        finished task, so the scheduler's start-up does not count); ``""`` when there is no estimate."""
+        now = time.time() if now is None else now
+        total, done = self.totals[stage], self.done[stage]
+        start = self.first_done.get(stage)
+        if start is None or done < 2 or done >= total or now <= start:
+            return ""
+        left = (now - start) / (done - 1) * (total - done)
+        return f", ~{left:.0f}s left" if left < 120 else f", ~{left / 60:.1f} min left"
 
     def update(self, stage: str, ok: bool) -> None:
         self.done[stage] += 1
+        self.first_done.setdefault(stage, time.time())
         if not ok:
             self.failed[stage] += 1
         if self.quiet:
@@ -59,7 +80,7 @@ class Progress:
         if self.tty:
             width = 24
             bar = "#" * (width * done // max(total, 1))
-            self.stream.write(f"\r  {stage:<16} [{bar:<{width}}] {done}/{total}{fail}  {time.time() - self.t0:6.1f}s ")
+            self.stream.write(f"\r  {stage:<16} [{bar:<{width}}] {done}/{total}{fail}  {time.time() - self.t0:6.1f}s{self.eta(stage)} ")
             if done == total:
                 self.stream.write("\n")
             self.stream.flush()
@@ -67,22 +88,65 @@ class Progress:
             self.last_pct[stage] = pct
             self.last_print = time.time()
             if total >= 8 or done == total:
-                print(f"  {stage}: {done}/{total} done{fail} ({time.time() - self.t0:.1f}s)", file=self.stream, flush=True)
+                print(f"  {stage}: {done}/{total} done{fail} ({time.time() - self.t0:.1f}s{self.eta(stage)})", file=self.stream, flush=True)
+
+
+SCHEDULER_TIMEOUT_S = 10
+DASHBOARD_ADDRESS = "127.0.0.1:0"  # this machine only, a free port (see docs/scale.md to expose it)
 
 
 def make_client(workers: int = 2, scheduler: str | None = None, local_dir: str | None = None,
-                memory_limit: str = "auto"):
-    """A dask.distributed Client: to ``scheduler`` if given, else a LocalCluster of ``workers`` processes."""
+                memory_limit: str = "auto", log=None):
+    """A dask.distributed Client: to ``scheduler`` if given, else a LocalCluster of ``workers`` processes.
+
+    The local cluster's dashboard listens on 127.0.0.1 only; ``log`` (a print-like function) receives its URL.
+    Its worker processes ignore Ctrl-C: the client process alone handles it and shuts them down cleanly.
+
+    Raises:
+        UserError: the scheduler does not answer within SCHEDULER_TIMEOUT_S seconds, or its address is malformed.
+    """
     from distributed import Client, LocalCluster
     import dask
 
     if scheduler:
-        return Client(scheduler, timeout="30s")
+        return _connect(Client, scheduler)
     dask.config.set({"distributed.worker.daemon": True, "distributed.admin.tick.limit": "60s",
                      "distributed.worker.memory.terminate": False})
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
-                           local_directory=local_dir, memory_limit=memory_limit, silence_logs=40)
+    with _ctrl_c_ignored_by_children():
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=DASHBOARD_ADDRESS, local_directory=local_dir,
+                               memory_limit=memory_limit, silence_logs=40)
+    if log is not None and cluster.dashboard_link:
+        log(f"dask dashboard: {cluster.dashboard_link}")
     return Client(cluster)
+
+
+def _connect(Client, address: str):
+    """A Client connected to the scheduler at ``address``, or a UserError saying what to do."""
+    fix = ("start a scheduler (`dask scheduler` prints its address, e.g. tcp://10.0.0.5:8786) and its workers, "
+           "check the host, port and firewall, or leave out --scheduler to run on local worker processes")
+    if "://" not in address and ":" not in address:
+        raise UserError(f"--scheduler '{address}' is not an address like tcp://HOST:PORT", fix=fix)
+    try:
+        return Client(address, timeout=f"{SCHEDULER_TIMEOUT_S}s")
+    except (OSError, ValueError, TypeError, TimeoutError) as exc:
+        raise UserError(f"cannot connect to the dask scheduler at {address} within {SCHEDULER_TIMEOUT_S} s "
+                        f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else 'no answer'})",
+                        fix=fix) from None
+
+
+@contextmanager
+def _ctrl_c_ignored_by_children():
+    """Ignore SIGINT while worker processes start, so they inherit "ignore" (a Ctrl-C to the process group
+    then reaches only this process, which closes the cluster): no traceback from every worker."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def execute(tasks: list[Task], store: Store, client=None, quiet: bool = False, stream=None,
@@ -104,10 +168,9 @@ def execute(tasks: list[Task], store: Store, client=None, quiet: bool = False, s
     if client is None:
         for t in unique.values():
             ups = [outcome.results[k] for k in t.deps if k in outcome.results]
-            res = run_task(task_spec(t, store), *ups)
-            res["display"] = t.display
+            res = run_task(task_call(t, store), *ups)
             outcome.results[t.key] = res
-            progress.update(t.stage, res["status"] in ("ok", "cached"))
+            progress.update(t.stage, res.status.succeeded)
     else:
         from distributed import as_completed
 
@@ -115,7 +178,7 @@ def execute(tasks: list[Task], store: Store, client=None, quiet: bool = False, s
         for t in unique.values():
             ups = [futures[k] for k in t.deps if k in futures]
             dask_key = f"{t.stage}-{t.label or 'once'}-{t.key[:16]}{key_suffix}".replace(" ", "_")
-            futures[t.key] = client.submit(run_task, task_spec(t, store), *ups, key=dask_key, retries=0)
+            futures[t.key] = client.submit(run_task, task_call(t, store), *ups, key=dask_key, retries=0)
         by_future = {f.key: k for k, f in futures.items()}
         for fut in as_completed(list(futures.values())):
             key = by_future[fut.key]
@@ -123,24 +186,31 @@ def execute(tasks: list[Task], store: Store, client=None, quiet: bool = False, s
             try:
                 res = fut.result()
             except Exception as exc:  # worker died (memory, segfault) or the scheduler lost the task
-                res = {"key": key, "stage": t.stage, "label": t.label, "status": "failed", "seconds": 0.0,
-                       "error": f"{type(exc).__name__}: {exc}"}
-            res["display"] = t.display
+                res = TaskResult(key, t.stage, t.label, TaskStatus.FAILED, display=t.display,
+                                 error=f"{type(exc).__name__}: {exc}")
             outcome.results[key] = res
-            progress.update(t.stage, res["status"] in ("ok", "cached"))
+            progress.update(t.stage, res.status.succeeded)
         for f in futures.values():
             f.release()
     outcome.wall_seconds = time.time() - t0
     return outcome
 
 
+_TMP_NAME = re.compile(r"^(trash-)?[0-9a-f]{32}$|^dask-worker-space$")
+
+
 def clean_tmp(store: Store, older_than_s: float = 3600) -> None:
-    """Remove half-written temporary folders left by killed runs (older than ``older_than_s``)."""
+    """Remove half-written temporary folders left by killed runs (older than ``older_than_s``).
+
+    Only in a folder carrying the engine's cache marker, and only names the engine gives its temporary
+    folders: nothing else is ever removed."""
     base = os.path.join(store.root, "tmp")
-    if not os.path.isdir(base):
+    if not os.path.isdir(base) or not store.is_marked():
         return
     now = time.time()
     for name in os.listdir(base):
+        if not _TMP_NAME.match(name):
+            continue
         path = os.path.join(base, name)
         try:
             if now - os.path.getmtime(path) > older_than_s:

@@ -1,8 +1,9 @@
 """Code fingerprints: a hash of a function's AST and of the project functions it uses.
 
 Comments, docstrings and formatting do not change a fingerprint; a change to the function or to any
-project function, class or module constant it reaches (transitively) does. Third-party code is not
-followed: it is pinned by the package versions recorded in each run's provenance.
+project function, class or module constant it reaches (transitively) does. "Project" is the function's own
+module plus the packages the caller names (the plugins declare them, see ``registry.fingerprint_packages``);
+other code is not followed: it is pinned by the package versions recorded in each run's provenance.
 """
 from __future__ import annotations
 
@@ -15,12 +16,14 @@ import textwrap
 import types
 from typing import Any
 
-PROJECT_PACKAGES = ("corr_core", "stages", "shapecorr")
 
-
-def _is_project(obj: Any, extra: frozenset = frozenset()) -> bool:
+def _is_project(obj: Any, project: frozenset) -> bool:
+    """True when ``obj`` (a module, function or class) lives in one of the ``project`` modules or packages."""
     mod = getattr(obj, "__module__", None) if not isinstance(obj, types.ModuleType) else obj.__name__
-    return bool(mod) and (mod.split(".")[0] in PROJECT_PACKAGES or mod in extra)
+    if not isinstance(mod, str) or not mod:
+        return False
+    parts = mod.split(".")
+    return any(".".join(parts[:i]) in project for i in range(1, len(parts) + 1))
 
 
 def _strip_docstrings(tree: ast.AST) -> ast.AST:
@@ -42,22 +45,22 @@ def use_disk_cache(path: str) -> None:
     object's name and line: a no-op run then parses no source at all."""
     if _DISK["path"] == path:
         return
+    from .store import read_checked_json
+
     _DISK.update(path=path, dirty=False)
-    try:
-        with open(path, encoding="utf-8") as fh:
-            _DISK["table"] = json.load(fh)
-    except (OSError, ValueError):
-        _DISK["table"] = {}
+    table = read_checked_json(path, "fingerprinting the code again", default={})
+    _DISK["table"] = {k: v for k, v in table.items() if isinstance(k, str)}
 
 
 def save_disk_cache() -> None:
     """Write the digest cache if it changed (atomically)."""
+    from .store import write_checked_json
+
     if _DISK["path"] and _DISK["dirty"]:
-        tmp = f"{_DISK['path']}.{os.getpid()}.tmp"
-        os.makedirs(os.path.dirname(_DISK["path"]), exist_ok=True)
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(_DISK["table"], fh)
-        os.replace(tmp, _DISK["path"])
+        try:
+            write_checked_json(_DISK["path"], _DISK["table"])
+        except OSError:  # a read-only cache: the table is only a speed-up
+            pass
         _DISK["dirty"] = False
 
 
@@ -120,20 +123,20 @@ def _referenced_names(tree: ast.AST) -> set[tuple[str, ...]]:
     return chains
 
 
-def _resolve(chain: tuple[str, ...], namespace: dict, extra: frozenset = frozenset()) -> list[tuple[str, Any]]:
+def _resolve(chain: tuple[str, ...], namespace: dict, project: frozenset) -> list[tuple[str, Any]]:
     """Project objects reached by a dotted name chain, with their qualified names."""
     if chain[0] not in namespace:
         return []
     obj, found = namespace[chain[0]], []
     for attr in chain[1:] + (None,):
         if isinstance(obj, types.ModuleType):
-            if attr is None or not _is_project(obj, extra):
+            if attr is None or not _is_project(obj, project):
                 break
             if not hasattr(obj, attr):
                 break
             obj = getattr(obj, attr)
             continue
-        if _is_project(obj, extra) and (inspect.isfunction(obj) or inspect.isclass(obj)):
+        if _is_project(obj, project) and (inspect.isfunction(obj) or inspect.isclass(obj)):
             found.append((f"{obj.__module__}.{obj.__qualname__}", obj))
         elif isinstance(obj, (int, float, str, bytes, bool, tuple, frozenset, list, dict)) and len(chain) == 1:
             found.append((f"const:{chain[0]}", obj))
@@ -141,18 +144,18 @@ def _resolve(chain: tuple[str, ...], namespace: dict, extra: frozenset = frozens
     return found
 
 
-def code_fingerprint(func: Any) -> tuple[str, dict[str, str]]:
+def code_fingerprint(func: Any, packages: tuple[str, ...] | frozenset = ()) -> tuple[str, dict[str, str]]:
     """Fingerprint ``func`` and every project function/class/constant it reaches.
 
-    "Project" means the packages ``corr_core`` and ``stages`` plus the module that defines ``func``
-    (so helpers next to a plugin's stage function are tracked too).
+    "Project" means ``packages`` (package or module names, e.g. ``("mylib", "myapp")``) plus the
+    module that defines ``func`` (so helpers next to a plugin's stage function are tracked too).
 
     Returns:
         digest: one hex string over everything reached.
         parts: {qualified name: hex digest} of each reached project object (for "why will this rerun").
     """
     func = inspect.unwrap(func)
-    extra = frozenset({func.__module__})
+    project = frozenset(packages) | {func.__module__}
     parts: dict[str, str] = {}
     stack: list[tuple[str, Any]] = [(f"{func.__module__}.{func.__qualname__}", func)]
     while stack:
@@ -170,7 +173,7 @@ def code_fingerprint(func: Any) -> tuple[str, dict[str, str]]:
         if inspect.isfunction(obj) and obj.__closure__:
             namespace.update(zip(obj.__code__.co_freevars, (c.cell_contents for c in obj.__closure__)))
         for chain in refs:
-            for name, target in _resolve(chain, namespace, extra):
+            for name, target in _resolve(chain, namespace, project):
                 if name.startswith("const:"):
                     name = f"const:{getattr(inspect.getmodule(obj), '__name__', '?')}.{chain[0]}"
                 stack.append((name, target))

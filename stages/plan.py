@@ -1,26 +1,29 @@
-"""From a validated pipeline to a task graph with content-addressed keys.
+"""From a validated pipeline to a task graph with content-addressed keys; planning runs and writes nothing.
 
 key(task) = hash(function name, code fingerprint, canonical JSON of its declared params, keys of its
 inputs). Input keys chain (an upstream task's key stands for its result), so big arrays are never
 re-hashed; raw input files are hashed by content, with a (size, mtime) cache so unchanged files are not
-read again.
+read again. The caches (input file hashes, code fingerprints) are written by ``run`` only
+(:meth:`Plan.save_caches`); stages that read a generated dataset not written yet are planned without tasks
+(``StagePlan.pending``) until ``run`` has generated it.
 """
 from __future__ import annotations
 
-import glob
+import enum
 import json
+import glob
 import os
 import re
-import shutil
 from dataclasses import dataclass, field
 from typing import Any
 
-from . import registry
-from .config import DatasetSpec, GeneratedPath, Pipeline, StageSpec
-from .errors import PipelineError
-from . import fingerprint
+from . import fingerprint, registry
+from .config import DatasetSpec, GeneratedPath, InputRef, Pipeline, StageSpec, load_pipeline
+from .errors import PipelineError, warn_once
 from .fingerprint import code_fingerprint
-from .store import Store, atomic_write_text, digest_json, file_checksum
+from .generated import resolve_generated
+from .inputs import DictInput, EntryInput, InputSpec, PairsInput, StackInput, ValueInput
+from .store import Store, digest_json, file_checksum, read_checked_json, write_checked_json
 
 KEY_VERSION = 1
 
@@ -33,11 +36,9 @@ class FileHasher:
 
     def __init__(self, store: Store):
         self.path = os.path.join(store.root, "filehash.json")
-        try:
-            with open(self.path, encoding="utf-8") as fh:
-                self.table = json.load(fh)
-        except (FileNotFoundError, json.JSONDecodeError):
-            self.table = {}
+        table = read_checked_json(self.path, "rehashing the input files", default={})
+        # rows that are not [size, mtime_ns, digest] are dropped (the file is hashed again)
+        self.table = {p: r for p, r in table.items() if isinstance(r, list) and len(r) == 3}
         self.dirty = False
 
     def digest(self, path: str) -> str:
@@ -53,24 +54,35 @@ class FileHasher:
 
     def save(self) -> None:
         if self.dirty:
-            atomic_write_text(self.path, json.dumps(self.table))
+            try:
+                write_checked_json(self.path, self.table)
+            except OSError:  # a read-only cache: the hashes are only a speed-up
+                pass
             self.dirty = False
 
 
 # ---------------------------------------------------------------------------------------------
 # what a stage or dataset offers downstream
 # ---------------------------------------------------------------------------------------------
+class SourceKind(enum.Enum):
+    """The shape of what a dataset or stage offers its consumers."""
+    VALUE = "value"      # one dataset value (a path)
+    ITEMS = "items"      # one input per item (a files/groups dataset, a per-item stage)
+    ENTRY = "entry"      # the result of a once stage
+    PAIRS = "pairs"      # the tiles of a pair stage
+    PENDING = "pending"  # not known until a generated dataset is written (by run)
+    SKIPPED = "skipped"  # nothing to offer: an optional dataset that is absent or empty, or a skipped stage
+
+
 @dataclass
 class Source:
-    """The result of a dataset or stage as seen by its consumers.
-
-    kind: "value" (one dataset value: a path), "items" (per-item), "entry" (a once stage),
-    "pairs" (a pair stage's tiles).
-    """
-    kind: str
-    items: dict[str, dict] = field(default_factory=dict)   # name -> input spec (per item)
-    single: dict | None = None                             # input spec of a once value
-    pairs: dict | None = None                              # pairs layout spec
+    """The result of a dataset or stage as seen by its consumers (see :class:`SourceKind`)."""
+    kind: SourceKind
+    items: dict[str, InputSpec] = field(default_factory=dict)   # ITEMS: item name -> input
+    single: InputSpec | None = None                             # VALUE, ENTRY
+    pairs: PairsInput | None = None                             # PAIRS
+    pending: str | None = None                                  # PENDING: the generated dataset waited for
+    skipped: str | None = None                                  # SKIPPED: why (shown by run and status)
 
     def item_names(self) -> list[str]:
         return list(self.items)
@@ -78,12 +90,13 @@ class Source:
 
 @dataclass
 class Task:
+    """One unit of work: a function call on inputs, identified by its content-addressed ``key``."""
     stage: str
     label: str                  # item name, "tile i-j" or "" for once stages
     key: str
     function: str
     params: dict
-    inputs: dict[str, dict]     # arg -> input spec for the worker
+    inputs: dict[str, InputSpec]  # arg -> what the worker loads for it
     deps: list[str]             # keys of upstream tasks
     input_digests: dict[str, str]
     item_name: str | None = None
@@ -101,175 +114,109 @@ class StagePlan:
     tasks: list[Task]
     source: Source
     input_items: dict[str, dict[str, str]] = field(default_factory=dict)
+    pending: str | None = None  # a generated dataset this stage needs and run has not written yet (no tasks)
+    skipped: str | None = None  # why this stage has no tasks: an input it needs is absent (see SourceKind.SKIPPED)
 
 
 @dataclass
 class Plan:
-    pipeline: Pipeline
+    pipeline: Pipeline          # with the paths of the generated datasets filled in (those written)
     store: Store
     stages: dict[str, StagePlan]
     datasets: dict[str, Source]
+    pending_generated: dict[str, str] = field(default_factory=dict)  # name -> why it is not usable yet
+    hasher: "FileHasher | None" = None
 
     def tasks(self) -> list[Task]:
         return [t for sp in self.stages.values() for t in sp.tasks]
 
     def missing(self) -> list[Task]:
-        return [t for t in self.tasks() if not self.store.has(t.key)]
+        """Tasks without a usable result, and tasks whose result left out failed items (they run again after
+        those items are retried: cached at once if the same items fail, recomputed if they now succeed)."""
+        return [t for t in self.tasks() if not self.store.has(t.key) or any(e[0] for e in self.store.left_out(t.key))]
 
-
-def _spec_key(spec: dict) -> Any:
-    """The identity of an input spec: what its value depends on."""
-    kind = spec["kind"]
-    if kind == "entry":
-        return spec["key"]
-    if kind == "value":
-        return spec.get("digest")
-    if kind == "dict":
-        return {k: _spec_key(v) for k, v in spec["items"].items()}
-    if kind == "stack":
-        return [_spec_key(v) for v in spec["parts"]]
-    if kind == "pairs":
-        return {"names": spec["names"], "tiles": spec["tiles"], "mirror": spec["mirror"]}
-    raise ValueError(kind)
-
-
-def _deps_of(spec: dict) -> list[str]:
-    kind = spec["kind"]
-    if kind == "entry":
-        return [spec["key"]]
-    if kind in ("dict", "stack"):
-        parts = spec["items"].values() if kind == "dict" else spec["parts"]
-        return [k for v in parts for k in _deps_of(v)]
-    if kind == "pairs":
-        return [t[2] for t in spec["tiles"]]
-    return []
+    def save_caches(self) -> None:
+        """Write the input-file hashes and code fingerprints computed while planning (``run`` does)."""
+        if self.hasher is not None:
+            self.hasher.save()
+        fingerprint.save_disk_cache()
 
 
 # ---------------------------------------------------------------------------------------------
 # planning
 # ---------------------------------------------------------------------------------------------
-def build_plan(pipe: Pipeline, log=print) -> Plan:
-    """Resolve generated data and datasets, then compute every task and its key (runs nothing else)."""
-    store = Store(pipe.cache_dir)
+def build_plan(pipe: Pipeline, log=None) -> Plan:
+    """Resolve generated data and datasets, then compute every task and its key. Reads only: runs no
+    generator and writes no file (not even the caches; see :meth:`Plan.save_caches`). ``log`` is unused
+    (planning prints nothing; problems are errors or one-time warnings)."""
+    store = Store(pipe.cache_dir)  # not claimed here: planning writes nothing (run.prepare claims it)
     fingerprint.use_disk_cache(os.path.join(store.root, "fingerprints.json"))
     hasher = FileHasher(store)
-    _materialize_generated(pipe, store, log)
+    pipe, pending = resolve_generated(pipe, store, hasher.digest)
     datasets = {name: _dataset_source(pipe, ds, hasher) for name, ds in pipe.datasets.items()}
-    hasher.save()
     sources: dict[str, Source] = dict(datasets)
     stages: dict[str, StagePlan] = {}
     for name, spec in pipe.stages.items():
         sp = _plan_stage(pipe, spec, sources)
         stages[name] = sp
         sources[name] = sp.source
-    fingerprint.save_disk_cache()
-    return Plan(pipe, store, stages, datasets)
+    return Plan(pipe, store, stages, datasets, pending, hasher)
 
 
-def _generated_key(gen) -> str:
-    fn = registry.get(gen.generator)
-    code, _ = code_fingerprint(fn.func)
-    return digest_json({"v": KEY_VERSION, "generator": gen.generator, "code": code, "params": gen.params})
-
-
-def _materialize_generated(pipe: Pipeline, store: Store, log) -> None:
-    """Write each generated dataset once into cache/generated/<key> and substitute its path."""
-    for gen in pipe.generated.values():
-        key = _generated_key(gen)
-        gen.path = os.path.join(store.root, "generated", key)
-    used = _generated_names_used(pipe)
-    for name in used:
-        gen = pipe.generated[name]
-        if os.path.exists(os.path.join(gen.path, ".complete")):
-            continue
-        log(f"generating dataset '{name}' with {gen.generator} {gen.params} -> {gen.path}")
-        tmp = store.tmp_dir()
-        registry.get(gen.generator).func(out_dir=tmp, **gen.params)
-        atomic_write_text(os.path.join(tmp, ".complete"), json.dumps({"generator": gen.generator, "params": gen.params}))
-        os.makedirs(os.path.dirname(gen.path), exist_ok=True)
-        try:
-            os.rename(tmp, gen.path)
-        except OSError:
-            if not os.path.exists(os.path.join(gen.path, ".complete")):
-                raise
-            shutil.rmtree(tmp, ignore_errors=True)
-
-    def sub(value):
-        if isinstance(value, GeneratedPath) or (isinstance(value, str) and value.startswith("@generated/")):
-            gname, _, rest = value[len("@generated/"):].partition("/")
-            return os.path.join(pipe.generated[gname].path, rest) if rest else pipe.generated[gname].path
-        if isinstance(value, dict):
-            return {k: sub(v) for k, v in value.items()}
-        if isinstance(value, list):
-            return [sub(v) for v in value]
-        return value
-
-    pipe.params = sub(pipe.params)
-    for ds in pipe.datasets.values():
-        ds.path = sub(ds.path)
-    for st in pipe.stages.values():
-        st.params = sub(st.params)
-
-
-def _generated_names_used(pipe: Pipeline) -> list[str]:
-    found: set[str] = set()
-
-    def scan(value):
-        if isinstance(value, str) and value.startswith("@generated/"):
-            found.add(value[len("@generated/"):].split("/")[0])
-        elif isinstance(value, dict):
-            for v in value.values():
-                scan(v)
-        elif isinstance(value, list):
-            for v in value:
-                scan(v)
-
-    scan([ds.path for ds in pipe.datasets.values()])
-    scan([st.params for st in pipe.stages.values()])
-    return sorted(found)
+def plan_pipeline(path: str, overrides=(), cache_dir=None, output_dir=None, quiet=False) -> Plan:
+    """Read and validate the pipeline file ``path`` (with ``--set`` overrides) and plan it (``quiet`` is
+    accepted for symmetry with the commands; planning prints nothing)."""
+    pipe = load_pipeline(path, overrides, cache_dir=cache_dir, output_dir=output_dir)
+    return build_plan(pipe)
 
 
 def _dataset_error(pipe: Pipeline, ds: DatasetSpec, msg: str, fix: str) -> PipelineError:
     return PipelineError(msg, file=pipe.file, key=f"datasets.{ds.name}.{ds.kind}", fix=fix)
 
 
-def _value_spec(value: Any, digest: str) -> dict:
-    return {"kind": "value", "value": value, "digest": digest}
-
-
 def _dataset_source(pipe: Pipeline, ds: DatasetSpec, hasher: FileHasher) -> Source:
+    """What dataset ``ds`` offers: one value (file, folder) or items (files, groups), hashed by content;
+    pending when its path lies in a generated dataset not written yet."""
+    if isinstance(ds.path, GeneratedPath):
+        return Source(SourceKind.PENDING, pending=ds.path.generated_name)
     fix = "check the path, or point the pipeline at your data with --set data.root=PATH"
     path = ds.path
     if ds.kind in ("file", "folder"):
         exists = os.path.isfile(path) if ds.kind == "file" else os.path.isdir(path)
         if not exists:
             if ds.optional:
-                return Source("value", single=_value_spec(None, "absent"))
+                return Source(SourceKind.VALUE, single=ValueInput(None, "absent"))
             raise _dataset_error(pipe, ds, f"{ds.kind} not found: {path}", fix)
         if ds.kind == "file":
-            return Source("value", single=_value_spec(os.path.abspath(path), hasher.digest(path)))
+            return Source(SourceKind.VALUE, single=ValueInput(os.path.abspath(path), hasher.digest(path)))
         files = sorted(p for p in glob.glob(os.path.join(path, "**", "*"), recursive=True) if os.path.isfile(p))
         digest = digest_json([[os.path.relpath(p, path), hasher.digest(p)] for p in files])
-        return Source("value", single=_value_spec(os.path.abspath(path), digest))
+        return Source(SourceKind.VALUE, single=ValueInput(os.path.abspath(path), digest))
+    if ds.optional and not path:
+        return Source(SourceKind.SKIPPED, skipped=f"optional dataset '{ds.name}' is not given (its path is empty)")
     folder = os.path.dirname(path) or "."
     if not glob.has_magic(folder) and not os.path.isdir(folder):
         if ds.optional:
-            return Source("items", items={})
+            return Source(SourceKind.SKIPPED, skipped=f"optional dataset '{ds.name}' is absent ({folder} not found)")
         raise _dataset_error(pipe, ds, f"folder not found: {folder}", fix)
-    files = sorted(p for p in glob.glob(path) if os.path.isfile(p))
-    items: dict[str, dict] = {}
+    files = sorted(p for p in glob.glob(_any_case_extension(path) if ds.kind == "files" else path)
+                   if os.path.isfile(p))
+    items: dict[str, ValueInput] = {}
     if ds.kind == "files":
         for p in files:
             name = os.path.splitext(os.path.basename(p))[0]
             if name in items:
-                raise _dataset_error(pipe, ds, f"two files give the item name '{name}': {items[name]['value']} and {p}",
+                raise _dataset_error(pipe, ds, f"two files give the item name '{name}': {items[name].value} and {p}",
                                      "make the glob narrower or rename one file")
-            items[name] = _value_spec(os.path.abspath(p), hasher.digest(p))
+            items[name] = ValueInput(os.path.abspath(p), hasher.digest(p))
     else:
         groups: dict[str, dict[int, str]] = {}
         rx = re.compile(ds.pattern)
+        unmatched = []
         for p in files:
-            m = rx.fullmatch(os.path.basename(p))
+            m = _match_name(rx, os.path.basename(p))
+            if m is None and _looks_like_data(os.path.basename(p), ds.pattern):
+                unmatched.append(os.path.basename(p))
             if m:
                 idx = m.groupdict().get("index")
                 idx = 0 if idx is None else int(idx) if idx.isdigit() else idx
@@ -278,20 +225,53 @@ def _dataset_source(pipe: Pipeline, ds: DatasetSpec, hasher: FileHasher) -> Sour
                     raise _dataset_error(pipe, ds, f"item '{m.group('item')}' has two files for part {idx}: "
                                          f"{group[idx]} and {p}", "keep one of them")
                 group[idx] = os.path.abspath(p)
+        if unmatched:
+            shown = ", ".join(unmatched[:6]) + (f" ... (+{len(unmatched) - 6})" if len(unmatched) > 6 else "")
+            warn_once(f"dataset '{ds.name}': {len(unmatched)} file(s) in {os.path.dirname(path) or '.'} do not match "
+                      f"its pattern and are not used: {shown} (pattern {ds.pattern}; rename them, e.g. NAME.obj or "
+                      f"NAME_V.png, or change 'pattern:')")
         counts = [len(g) for g in groups.values()]
         expected = max(counts) if counts else 0
         for name in sorted(groups):
             g = groups[name]
-            if all(isinstance(k, int) for k in g) and expected > 1 and sorted(g) != list(range(expected)):
-                missing = sorted(set(range(expected)) - set(g))
-                raise _dataset_error(pipe, ds, f"item '{name}' is missing parts {missing} "
-                                     f"(other items have {expected}: 0..{expected - 1})",
-                                     f"add the missing files for '{name}' or remove its files")
             paths = [g[k] for k in sorted(g)]
-            items[name] = _value_spec(paths, digest_json([hasher.digest(p) for p in paths]))
+            error = ""
+            if all(isinstance(k, int) for k in g) and expected > 1 and sorted(g) != list(range(expected)):
+                missing = sorted(set(range(expected)) - set(g))  # an item failure of this item, not the pipeline's
+                error = (f"{os.path.dirname(paths[0])}: item '{name}' is missing parts {missing} (other items have "
+                         f"{expected}: 0..{expected - 1}); add the missing files for '{name}' or remove its files")
+            items[name] = ValueInput(paths, digest_json([hasher.digest(p) for p in paths]), error)
     if not items and not ds.optional:
         raise _dataset_error(pipe, ds, f"no files match {path}", fix)
-    return Source("items", items=dict(sorted(items.items())))
+    if not items:
+        return Source(SourceKind.SKIPPED, skipped=f"optional dataset '{ds.name}' is empty (no files match {path})")
+    return Source(SourceKind.ITEMS, items=dict(sorted(items.items())))
+
+
+def _any_case_extension(path: str) -> str:
+    """A glob whose literal file extension also matches in upper or mixed case: ``d/*.obj`` -> ``d/*.[oO][bB][jJ]``."""
+    folder, base = os.path.split(path)
+    m = re.fullmatch(r"(.*\.)([A-Za-z0-9]+)", base)
+    if not m:
+        return path
+    ext = "".join(f"[{c.lower()}{c.upper()}]" if c.isalpha() else c for c in m.group(2))
+    return os.path.join(folder, m.group(1) + ext)
+
+
+def _match_name(rx: re.Pattern, name: str) -> re.Match | None:
+    """``rx`` matched against a file name, also with its extension in lower case (``UPPER.OBJ``)."""
+    m = rx.fullmatch(name)
+    if m is None:
+        stem, ext = os.path.splitext(name)
+        if ext != ext.lower():
+            m = rx.fullmatch(stem + ext.lower())
+    return m
+
+
+def _looks_like_data(name: str, pattern: str) -> bool:
+    """True when the file's extension is one the pattern names (a data file whose name does not fit)."""
+    ext = os.path.splitext(name)[1][1:].lower()
+    return bool(ext) and re.search(rf"(?<![A-Za-z0-9]){re.escape(ext)}(?![A-Za-z0-9])", pattern, re.I) is not None
 
 
 def _task_key(function: str, code: str, params: dict, input_ids: dict, item_name: str | None) -> str:
@@ -299,13 +279,16 @@ def _task_key(function: str, code: str, params: dict, input_ids: dict, item_name
                         "inputs": input_ids, "item": item_name})
 
 
-def _resolve_input(stage: StageSpec, arg: str, ref, sources: dict[str, Source], item: str | None,
-                   pipe: Pipeline) -> dict:
+def _resolve_input(stage: StageSpec, arg: str, ref: InputRef, sources: dict[str, Source], item: str | None,
+                   pipe: Pipeline) -> InputSpec:
+    """The input spec of argument ``arg`` (wired to ``ref``) for one task of ``stage`` (``item``: its item)."""
     src = sources[ref.source]
     where = f"stages.{stage.name}.inputs.{arg}"
-    if src.kind in ("value", "entry"):
+    if src.kind is SourceKind.SKIPPED:  # an optional input (see _skipped_of): the function's default None
+        return ValueInput(None, "skipped")
+    if src.kind in (SourceKind.VALUE, SourceKind.ENTRY):
         return src.single
-    if src.kind == "pairs":
+    if src.kind is SourceKind.PAIRS:
         return src.pairs
     if ref.item is not None:
         if ref.item not in src.items:
@@ -318,7 +301,7 @@ def _resolve_input(stage: StageSpec, arg: str, ref, sources: dict[str, Source], 
                                 f"'{stage.over}')", file=pipe.file, key=where,
                                 fix=f"use '{ref.source}[*]' to pass the whole collection")
         return src.items[item]
-    return {"kind": "dict", "items": dict(src.items)}
+    return DictInput(dict(src.items))
 
 
 def make_blocks(names: list[str], tile: int) -> list[tuple[int, int]]:
@@ -339,19 +322,59 @@ def make_blocks(names: list[str], tile: int) -> list[tuple[int, int]]:
     return blocks
 
 
-def _plan_stage(pipe: Pipeline, spec: StageSpec, sources: dict[str, Source]) -> StagePlan:
-    fn = registry.get(spec.function)
-    code, parts = code_fingerprint(fn.func)
+def _pending_of(spec: StageSpec, sources: dict[str, Source]) -> str | None:
+    """The generated dataset (not written yet) that ``spec`` waits for, through its inputs or params."""
+    for ref in [*spec.inputs.values(), *([InputRef(spec.over)] if spec.over else [])]:
+        if sources[ref.source].kind is SourceKind.PENDING:
+            return sources[ref.source].pending
+    stack = list(spec.params.values())
+    while stack:
+        v = stack.pop()
+        if isinstance(v, GeneratedPath):
+            return v.generated_name
+        stack.extend(v.values() if isinstance(v, dict) else v if isinstance(v, list) else [])
+    return None
+
+
+def _skipped_of(spec: StageSpec, fn: registry.StageFunction, sources: dict[str, Source]) -> str | None:
+    """Why ``spec`` cannot run, when what it runs over or a required input is skipped (an optional dataset
+    that is absent or empty, or a stage skipped for that reason); None when it can. An optional input of the
+    function (``other=None``) wired to a skipped source is passed as None instead."""
+    if spec.over is not None and sources[spec.over].kind is SourceKind.SKIPPED:
+        return sources[spec.over].skipped  # the root cause (a skipped stage passes its own on)
+    for arg, ref in spec.inputs.items():
+        src = sources[ref.source]
+        if src.kind is SourceKind.SKIPPED and arg not in fn.optional_inputs:
+            return src.skipped
+    return None
+
+
+def _stage_code(fn: registry.StageFunction) -> tuple[str, dict[str, str]]:
+    """The code fingerprint of a stage function (and of its mirror) and its parts."""
+    packages = registry.fingerprint_packages()
+    code, parts = code_fingerprint(fn.func, packages)
     if fn.mirror is not None:
-        mcode, mparts = code_fingerprint(fn.mirror)
+        mcode, mparts = code_fingerprint(fn.mirror, packages)
         parts.update(mparts)
         code = digest_json([code, mcode])
+    return code, parts
+
+
+def _plan_stage(pipe: Pipeline, spec: StageSpec, sources: dict[str, Source]) -> StagePlan:
+    fn = registry.get(spec.function)
+    code, parts = _stage_code(fn)
+    pending = _pending_of(spec, sources)
+    if pending is not None:
+        return StagePlan(spec, code, parts, [], Source(SourceKind.PENDING, pending=pending), {}, pending)
+    skipped = _skipped_of(spec, fn, sources)
+    if skipped is not None:
+        return StagePlan(spec, code, parts, [], Source(SourceKind.SKIPPED, skipped=skipped), {}, skipped=skipped)
     tasks: list[Task] = []
 
-    def add_task(label: str, inputs: dict[str, dict], item_name: str | None):
-        ids = {arg: _spec_key(s) for arg, s in inputs.items()}
+    def add_task(label: str, inputs: dict[str, InputSpec], item_name: str | None) -> str:
+        ids = {arg: s.key() for arg, s in inputs.items()}
         key = _task_key(spec.function, code, spec.params, ids, item_name if "item_name" in fn.engine_args else None)
-        deps = sorted({k for s in inputs.values() for k in _deps_of(s)})
+        deps = sorted({k for s in inputs.values() for k in s.deps()})
         digests = {arg: digest_json(i) for arg, i in ids.items()}
         tasks.append(Task(spec.name, label, key, spec.function, spec.params, inputs, deps, digests, item_name))
         return key
@@ -359,18 +382,18 @@ def _plan_stage(pipe: Pipeline, spec: StageSpec, sources: dict[str, Source]) -> 
     input_items: dict[str, dict[str, str]] = {}
     if spec.fanout == "item":
         over = sources[spec.over]
-        if over.kind != "items":
+        if over.kind is not SourceKind.ITEMS:
             raise PipelineError(f"cannot run per item of '{spec.over}': it is not a collection",
                                 file=pipe.file, key=f"stages.{spec.name}.foreach",
                                 fix="foreach takes a files/groups dataset or a per-item stage")
-        out = {}
+        out: dict[str, InputSpec] = {}
         for item in over.items:
             inputs = {arg: _resolve_input(spec, arg, ref, sources, item, pipe) for arg, ref in spec.inputs.items()}
-            out[item] = {"kind": "entry", "key": add_task(item, inputs, item)}
-        source = Source("items", items=out)
+            out[item] = EntryInput(add_task(item, inputs, item))
+        source = Source(SourceKind.ITEMS, items=out)
     elif spec.fanout == "pair":
         over = sources[spec.over]
-        if over.kind != "items":
+        if over.kind is not SourceKind.ITEMS:
             raise PipelineError(f"cannot pair the items of '{spec.over}': it is not a collection",
                                 file=pipe.file, key=f"stages.{spec.name}.pairs")
         names = list(over.items)
@@ -379,18 +402,21 @@ def _plan_stage(pipe: Pipeline, spec: StageSpec, sources: dict[str, Source]) -> 
         for bi, (s0, e0) in enumerate(blocks):
             for bj in range(bi, len(blocks)):
                 s1, e1 = blocks[bj]
-                a = {"kind": "stack", "parts": [over.items[n] for n in names[s0:e0]]}
-                b = {"kind": "stack", "parts": [over.items[n] for n in names[s1:e1]]}
+                a = StackInput(tuple(over.items[n] for n in names[s0:e0]))
+                b = StackInput(tuple(over.items[n] for n in names[s1:e1]))
                 key = add_task(f"tile {names[s0]}..{names[e0 - 1]} x {names[s1]}..{names[e1 - 1]}",
                                {"A": a, "B": b}, None)
-                tiles.append([bi, bj, key])
-        source = Source("pairs", pairs={"kind": "pairs", "names": names, "blocks": [list(b) for b in blocks],
-                                        "tiles": tiles, "mirror": spec.function})
+                tiles.append((bi, bj, key))
+        source = Source(SourceKind.PAIRS, pairs=PairsInput(tuple(names), tuple(blocks), tuple(tiles), spec.function))
     else:
         inputs = {arg: _resolve_input(spec, arg, ref, sources, None, pipe) for arg, ref in spec.inputs.items()}
         for arg, s in inputs.items():
-            if s["kind"] == "dict":
-                input_items[arg] = {k: json.dumps(_spec_key(v)) for k, v in s["items"].items()}
-        key = add_task("", inputs, None)
-        source = Source("entry", single={"kind": "entry", "key": key})
+            if isinstance(s, DictInput):
+                input_items[arg] = {k: canonical_key(v) for k, v in s.items.items()}
+        source = Source(SourceKind.ENTRY, single=EntryInput(add_task("", inputs, None)))
     return StagePlan(spec, code, parts, tasks, source, input_items)
+
+
+def canonical_key(spec: InputSpec) -> str:
+    """An input's identity as JSON text (recorded per item, to name which items of a collection changed)."""
+    return json.dumps(spec.key())

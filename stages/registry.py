@@ -1,7 +1,19 @@
-"""The registry of functions a pipeline may name.
+"""The registry of functions a pipeline may name, and the plugins that register them.
 
-A YAML file can only name functions registered here (by the project's ``stages.library`` modules or by a
-module listed in the ``STAGES_PLUGINS`` environment variable): it cannot run arbitrary code.
+A YAML file can only name registered functions: it cannot run arbitrary code. Functions are registered by
+**plugins**, found through one mechanism, the Python entry point group ``stages.plugins``: an application
+declares in its ``pyproject.toml``::
+
+    [project.entry-points."stages.plugins"]
+    myapp = "myapp:PLUGIN"
+
+and the object it names is a :class:`Plugin`; importing its module registers the application's functions
+(with :func:`register`). The plugin also declares which packages the code fingerprints follow, which package
+versions the report lists, and the titles of the report groups its functions belong to.
+
+For tests and development, the environment variable ``STAGES_PLUGINS`` (comma-separated ``module`` or
+``module:attribute``) loads further plugins the same way; a module without a ``PLUGIN`` attribute counts as a
+plugin whose code is that module. Nothing else is ever imported by name.
 
 A registered function declares its interface through its signature:
 
@@ -18,14 +30,91 @@ turns an (a,b,...) block into the (b,a,...) block), ``"once"`` functions run onc
 from __future__ import annotations
 
 import importlib
+import importlib.metadata
 import inspect
 import os
 import types
 import typing
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
+
+from .errors import PipelineError
 
 ENGINE_ARGS = ("item_name", "out_dir")
+ENTRY_POINT_GROUP = "stages.plugins"
+PLUGINS_ENV = "STAGES_PLUGINS"
+
+
+@dataclass(frozen=True)
+class Measure:
+    """One column of a headline table (see :class:`Headline`).
+
+    Attributes:
+        label: the column title.
+        key: the dotted metric key of a cell (as ``stages.results.scalar_metrics`` flattens them); ``{row}`` is
+            replaced by the row name. ``"@seconds_per_task"`` is the compute seconds per task of the stage that
+            fed the row (the metrics stage's input named by :attr:`Headline.row_inputs`).
+        better: "max" or "min" (the best value of the column is marked), or None.
+        per_row: row -> key for rows whose value lives under another key.
+        only_row: a metric key whose value names the one row this measure applies to (e.g. "solver").
+        divide_by: a metric key the value is divided by (e.g. an upper bound).
+    """
+    label: str
+    key: str
+    better: str | None = "max"
+    per_row: dict[str, str] = field(default_factory=dict)
+    only_row: str | None = None
+    divide_by: str | None = None
+
+
+@dataclass(frozen=True)
+class Headline:
+    """A compact summary table the report shows first: rows (methods) x measures, best value marked.
+
+    Attributes:
+        group: the report group it summarises (a key of :attr:`Plugin.groups`).
+        title: the table's title.
+        rows: the row names (rows without any value are left out), or
+        rows_from: a metric key whose dict keys are the rows (used when ``rows`` is empty).
+        measures: the columns.
+        row_inputs: row -> the input of the metrics stage that produced it (for ``@seconds_per_task``).
+        figures: the figures that carry the result, as ``"function:file"`` (a file the stages running that
+            registered function publish, e.g. ``"corr.evaluate:accuracy.png"``), shown next to the table.
+    """
+    group: str
+    title: str
+    measures: tuple[Measure, ...]
+    rows: tuple[str, ...] = ()
+    rows_from: str | None = None
+    row_inputs: dict[str, str] = field(default_factory=dict)
+    figures: tuple[str, ...] = ()
+
+
+@dataclass
+class Plugin:
+    """What an application declares to the engine (the object its ``stages.plugins`` entry point names).
+
+    Attributes:
+        name: a short name (shown in errors and ``python -m stages functions``).
+        packages: packages (or modules) whose code the fingerprints follow: a function, class or module
+            constant in them that a stage function reaches is part of its cache key.
+        report_packages: distribution names whose versions the report's provenance lists.
+        groups: report group -> section title, in display order; a function registered with
+            ``group=G`` has its figures shown in section G.
+        headlines: the summary tables of the report (:class:`Headline`), in display order.
+        sweep_metrics: the dotted metric keys ``sweep`` prints by default (and the report's sweep tables show);
+            empty: the cells of the headline tables.
+    """
+    name: str
+    packages: tuple[str, ...] = ()
+    report_packages: tuple[str, ...] = ()
+    groups: dict[str, str] = field(default_factory=dict)
+    headlines: tuple[Headline, ...] = ()
+    sweep_metrics: tuple[str, ...] = ()
+
+    def owns(self, module: str) -> bool:
+        """True when ``module`` is one of :attr:`packages` or inside one."""
+        return any(module == p or module.startswith(p + ".") for p in self.packages)
 
 
 @dataclass
@@ -54,14 +143,18 @@ class StageFunction:
     writes_files: bool = False
     kind: str = "stage"  # "stage" or "generator"
     doc: str = field(default="")
+    group: str | None = None   # report group (see Plugin.groups)
+    module: str = ""           # the module that defines the function
+    validate: Callable[..., Any] | None = None  # checks the params when the pipeline is read (see register)
 
 
 _REGISTRY: dict[str, StageFunction] = {}
+_PLUGINS: dict[str, Plugin] = {}
 _LOADED = False
 
 
 def register(name: str, fanout: str = "once", mirror: Callable | None = None, writes_files: bool = False,
-             kind: str = "stage"):
+             kind: str = "stage", group: str | None = None, validate: Callable[..., Any] | None = None):
     """Decorator: make ``func`` available to pipelines under ``name``.
 
     Args:
@@ -71,6 +164,11 @@ def register(name: str, fanout: str = "once", mirror: Callable | None = None, wr
         writes_files: the function receives ``out_dir`` and the files it writes there are published to the
             pipeline's output folder.
         kind: "stage", or "generator" for functions that write a dataset folder (``generated:`` in YAML).
+        group: the report section of the stage's figures (a key of its plugin's ``groups``).
+        validate: ``validate(**params)`` is called with a stage's (or generator's) params, defaults filled in,
+            when the pipeline file is read, before anything runs. It raises ``ValueError`` (a message naming the
+            parameter and the fix) for values the function cannot use, reported as a configuration error; it
+            may return a list of warnings (values that run but give meaningless results).
     """
     if fanout not in ("once", "item", "pair"):
         raise ValueError(f"fanout must be once/item/pair, got {fanout!r}")
@@ -100,22 +198,87 @@ def register(name: str, fanout: str = "once", mirror: Callable | None = None, wr
         if name in _REGISTRY and _REGISTRY[name].func.__qualname__ != func.__qualname__:
             raise ValueError(f"function name {name!r} registered twice")
         _REGISTRY[name] = StageFunction(name, func, fanout, tuple(inputs), params, tuple(engine), mirror,
-                                        tuple(optional), writes_files, kind, inspect.getdoc(func) or "")
+                                        tuple(optional), writes_files, kind, inspect.getdoc(func) or "", group,
+                                        func.__module__, validate)
         func.__stage_name__ = name
         return func
 
     return wrap
 
 
+def load_plugin(spec: str) -> Plugin:
+    """Import ``module`` or ``module:attribute`` and register the :class:`Plugin` it holds (``PLUGIN`` by
+    default; a module without one is a plugin of its own code). Importing registers its functions."""
+    module_name, _, attr = spec.strip().partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise PipelineError(f"cannot import plugin '{spec}': {exc}",
+                            fix=f"install it, or fix {PLUGINS_ENV} / the '{ENTRY_POINT_GROUP}' entry point") from exc
+    plugin = getattr(module, attr or "PLUGIN", None)
+    if plugin is None and attr:
+        raise PipelineError(f"plugin '{spec}': module {module_name} has no attribute '{attr}'",
+                            fix="name a Plugin object, e.g. 'package:PLUGIN'")
+    return add_plugin(plugin if plugin is not None else Plugin(module_name, packages=(module_name,)))
+
+
+def add_plugin(plugin: Plugin) -> Plugin:
+    """Record a plugin's declarations (its functions are registered by importing its modules)."""
+    if not isinstance(plugin, Plugin):
+        raise PipelineError(f"a plugin must be a stages.registry.Plugin, got {type(plugin).__name__}",
+                            fix="declare PLUGIN = Plugin(name=..., packages=(...)) in the plugin's module")
+    _PLUGINS[plugin.name] = plugin
+    return plugin
+
+
+def installed_plugins() -> list[importlib.metadata.EntryPoint]:
+    """The entry points of the ``stages.plugins`` group (installed applications)."""
+    return sorted(importlib.metadata.entry_points(group=ENTRY_POINT_GROUP), key=lambda ep: ep.name)
+
+
 def load_library() -> None:
-    """Import the project's stage modules and the allow-listed plugin modules (``STAGES_PLUGINS``)."""
+    """Load every installed plugin (entry points) and the ones listed in ``STAGES_PLUGINS``, once."""
     global _LOADED
     if _LOADED:
         return
-    importlib.import_module("shapecorr")
-    for mod in filter(None, (m.strip() for m in os.environ.get("STAGES_PLUGINS", "").split(","))):
-        importlib.import_module(mod)
     _LOADED = True
+    for ep in installed_plugins():
+        load_plugin(ep.value)
+    for spec in filter(None, (m.strip() for m in os.environ.get(PLUGINS_ENV, "").split(","))):
+        load_plugin(spec)
+
+
+def plugins(functions: Iterable[str] | None = None) -> list[Plugin]:
+    """The loaded plugins (those that registered one of ``functions``, when given), in load order."""
+    load_library()
+    if functions is None:
+        return list(_PLUGINS.values())
+    modules = {_REGISTRY[f].module for f in functions if f in _REGISTRY}
+    return [p for p in _PLUGINS.values() if any(p.owns(m) for m in modules)]
+
+
+def fingerprint_packages() -> tuple[str, ...]:
+    """Every package a loaded plugin declares for code fingerprints."""
+    return tuple(dict.fromkeys(pkg for p in plugins() for pkg in p.packages))
+
+
+def group_titles() -> dict[str, str]:
+    """Report group -> title, merged over the loaded plugins in load order."""
+    out: dict[str, str] = {}
+    for p in plugins():
+        for key, title in p.groups.items():
+            out.setdefault(key, title)
+    return out
+
+
+def headlines(functions: Iterable[str] | None = None) -> list[Headline]:
+    """The headline tables of the loaded plugins (those that registered one of ``functions``, when given)."""
+    return [h for p in plugins(functions) for h in p.headlines]
+
+
+def sweep_metrics(functions: Iterable[str] | None = None) -> list[str]:
+    """The metric keys the plugins (those that registered one of ``functions``) want in sweep tables."""
+    return list(dict.fromkeys(k for p in plugins(functions) for k in p.sweep_metrics))
 
 
 def get(name: str) -> StageFunction:

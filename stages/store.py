@@ -4,22 +4,29 @@ Layout under the cache root::
 
     objects/ab/<key>.zarr/     one zarr v3 array (<name>.zarr) per ndarray in the value
     objects/ab/<key>.files/    files a stage published (for writes_files stages)
-    manifest/ab/<key>.json     written last, atomically: the entry is complete iff this exists
+    manifest/ab/<key>.json     written last, atomically: the entry is complete iff this exists and is valid
     runs/<pipeline-id>.json    the last run of each pipeline (keys, reasons, timings)
     filehash.json              (size, mtime) -> content hash cache for raw input files
     generated/<key>/           datasets written by generators
     tmp/                       half-written entries (never read; removed by gc)
+    .stages-cache              the marker: written when the engine creates the cache (see Store.claim);
+                               nothing is ever cleaned in a folder without it
 
 A value is any tree of dicts (str keys), lists, numpy arrays and JSON scalars. Arrays go to zarr
 (each entry is written by exactly one task, so there is one writer per chunk); the rest of the tree goes
 to the manifest, which also records a checksum of every array and file so a corrupted entry is detected
-when read and recomputed.
+when read and recomputed. The manifest itself carries a checksum over its canonical JSON (the inline values
+included): a truncated, non-UTF-8, edited or foreign manifest counts as missing (one warning, then the entry
+is recomputed), so ``has()`` and ``get()`` agree. The engine's small JSON tables (``filehash.json``,
+``fingerprints.json``, ``runs/*.json``) are written and read the same way (:func:`write_checked_json`,
+:func:`read_checked_json`).
 """
 from __future__ import annotations
 
 import hashlib
 import json
 import os
+import re
 import shutil
 import time
 import uuid
@@ -27,9 +34,10 @@ from typing import Any
 
 import numpy as np
 
-from .errors import CorruptEntry
+from .errors import CorruptEntry, UserError, warn_once
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+_MANIFEST_FIELDS = ("format", "key", "created", "tree", "arrays", "files", "info")
 _CHUNK_BYTES = 32 * 2**20
 
 
@@ -58,11 +66,67 @@ def _json_default(o: Any):
 def atomic_write_text(path: str, text: str) -> None:
     """Write ``text`` to ``path`` so readers see the old or the new content, never a mix."""
     path = os.path.abspath(path)
+    if os.path.isdir(path):
+        raise IsADirectoryError(21, "is a folder, not a file", path)
     os.makedirs(os.path.dirname(path), exist_ok=True)
     tmp = f"{path}.{uuid.uuid4().hex}.tmp"
-    with open(tmp, "w", encoding="utf-8") as fh:
-        fh.write(text)
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):  # the write or the rename failed: leave nothing behind
+            os.remove(tmp)
+
+
+_ABSENT = object()
+
+
+def _read_json_bytes(path: str) -> tuple[Any, str | None]:
+    """(parsed JSON, None), or (None, why it is unusable); (_ABSENT, None) when the file does not exist."""
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+    except FileNotFoundError:
+        return _ABSENT, None
+    except OSError as exc:
+        return None, f"cannot be read ({exc.strerror or exc})"
+    try:
+        return json.loads(data.decode("utf-8")), None
+    except UnicodeDecodeError:
+        return None, "is not UTF-8 text (overwritten or damaged)"
+    except ValueError:
+        return None, "is not valid JSON (truncated or edited)"
+
+
+def write_checked_json(path: str, obj: Any) -> None:
+    """Write ``obj`` atomically as ``{"checksum": ..., "data": obj}`` (see :func:`read_checked_json`)."""
+    data = json.loads(json.dumps(obj, default=_json_default))
+    atomic_write_text(path, json.dumps({"checksum": digest_json(data), "data": data}))
+
+
+def read_checked_json(path: str, what: str, default: Any = None, kind: type | None = dict,
+                      warn: bool = True) -> Any:
+    """The ``data`` written by :func:`write_checked_json`, or ``default`` when the file is missing or unusable.
+
+    Unusable (truncated, not UTF-8, not JSON, checksum mismatch, not a ``kind``) means: warn once naming the
+    file and what happens (``what``, e.g. "rebuilding it"), and return ``default``; never raise.
+    """
+    doc, problem = _read_json_bytes(path)
+    if doc is _ABSENT:
+        return default
+    if problem is None:
+        if not isinstance(doc, dict) or set(doc) != {"checksum", "data"}:
+            problem = "was not written by this version of the engine"
+        elif digest_json(doc["data"]) != doc["checksum"]:
+            problem = "does not match its checksum (edited or damaged)"
+        elif kind is not None and not isinstance(doc["data"], kind):
+            problem = f"does not hold a {kind.__name__}"
+    if problem is not None:
+        if warn:
+            warn_once(f"{path} {problem}; {what}")
+        return default
+    return doc["data"]
 
 
 def array_checksum(a: np.ndarray) -> str:
@@ -75,6 +139,46 @@ def file_checksum(path: str) -> str:
         for block in iter(lambda: fh.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
+
+
+SEAL_NAME = ".complete"
+
+
+def _folder_files(folder: str) -> list[str]:
+    """Relative paths of the files under ``folder`` (sorted), the seal itself excluded."""
+    out = []
+    for dirpath, _, filenames in os.walk(folder):
+        for fn in filenames:
+            rel = os.path.relpath(os.path.join(dirpath, fn), folder)
+            if rel != SEAL_NAME:
+                out.append(rel)
+    return sorted(out)
+
+
+def seal_folder(folder: str, meta: dict, digest=file_checksum) -> None:
+    """Record ``meta`` and the checksum of every file under ``folder`` in ``folder/.complete`` (written last)."""
+    files = {rel: digest(os.path.join(folder, rel)) for rel in _folder_files(folder)}
+    write_checked_json(os.path.join(folder, SEAL_NAME), {"meta": meta, "files": files})
+
+
+def check_folder(folder: str, digest=file_checksum) -> str | None:
+    """None when ``folder`` holds exactly the files its seal lists, with the same contents; else what differs.
+
+    ``digest(path)``: a content hash (pass a cached one, e.g. the planner's FileHasher.digest)."""
+    seal = read_checked_json(os.path.join(folder, SEAL_NAME), "", warn=False)
+    if seal is None or not isinstance(seal.get("files"), dict):
+        return f"its {SEAL_NAME} record is missing or unusable (written by an older version?)"
+    present = _folder_files(folder)
+    extra = sorted(set(present) - set(seal["files"]))
+    if extra:
+        return f"file(s) not written by the generator: {', '.join(extra[:3])}{' ...' if len(extra) > 3 else ''}"
+    for rel, sha in seal["files"].items():
+        path = os.path.join(folder, rel)
+        if not os.path.isfile(path):
+            return f"file {rel} is missing"
+        if digest(path) != sha:
+            return f"file {rel} was changed after it was generated"
+    return None
 
 
 def _encode(value: Any, arrays: dict[str, np.ndarray]) -> Any:
@@ -110,11 +214,20 @@ def _decode(tree: Any, arrays: dict[str, np.ndarray]) -> Any:
     return tree
 
 
+CACHE_MARKER = ".stages-cache"
+# what the engine writes at the top of a cache (a folder holding only these may be adopted as a cache)
+_CACHE_NAMES = ("manifest", "objects", "runs", "filehash.json", "fingerprints.json", "generated", "tmp", "sweeps",
+                CACHE_MARKER)
+KEY_PATTERN = re.compile(r"^[0-9a-f]{32}$")
+
+
 class Store:
     """Content-addressed entries under ``root`` (see module docstring)."""
 
-    def __init__(self, root: str):
+    def __init__(self, root: str, warn: bool = True):
+        """``warn``: print one warning per unreadable entry found (workers pass False: the client warns)."""
         self.root = os.path.abspath(root)
+        self.warn = warn
 
     # paths -------------------------------------------------------------------------------------
     def manifest_path(self, key: str) -> str:
@@ -131,23 +244,124 @@ class Store:
         os.makedirs(path, exist_ok=True)
         return path
 
+    # ownership ---------------------------------------------------------------------------------
+    def is_marked(self) -> bool:
+        """True when ``root`` carries the engine's cache marker (only then does it clean anything there)."""
+        return os.path.isfile(os.path.join(self.root, CACHE_MARKER))
+
+    def claim(self) -> None:
+        """Make ``root`` the engine's cache: create it with its marker, or adopt a folder that holds only what
+        the engine writes (a cache from before the marker existed). A read-only folder is left as it is.
+
+        Raises:
+            UserError: ``root`` is a file, or a folder with other content (e.g. ``cache: /tmp``): the engine
+                neither writes nor cleans there.
+        """
+        if self.is_marked():
+            return
+        if os.path.lexists(self.root) and not os.path.isdir(self.root):
+            raise UserError(f"the cache {self.root} is not a folder", fix="choose a folder for --cache / 'cache:'")
+        if os.path.isdir(self.root):
+            try:
+                foreign = sorted(n for n in os.listdir(self.root) if not n.startswith(_CACHE_NAMES))
+            except OSError as exc:
+                raise UserError(f"cannot read the cache folder {self.root}: {exc.strerror}") from None
+            if foreign:
+                shown = ", ".join(foreign[:4]) + (" ..." if len(foreign) > 4 else "")
+                raise UserError(f"the cache folder {self.root} is not a stages cache (it holds {shown} and no "
+                                f"{CACHE_MARKER} marker): the engine does not write or clean there",
+                                fix="choose a new or empty folder for --cache / 'cache:' (e.g. ./cache)")
+        try:
+            os.makedirs(self.root, exist_ok=True)
+            atomic_write_text(os.path.join(self.root, CACHE_MARKER),
+                              json.dumps({"stages_cache": FORMAT_VERSION, "created": time.time()}))
+        except OSError:
+            pass  # read-only: reading works; writing commands say so (see writable)
+
+    def writable(self) -> bool:
+        """True when entries can be written under ``root``."""
+        return os.access(self.root, os.W_OK | os.X_OK)
+
+    def discard(self, path: str) -> None:
+        """Remove a folder inside the cache (moved aside first, so a half-deleted folder is never seen)."""
+        path = os.path.abspath(path)
+        if os.path.commonpath([path, self.root]) != self.root or path == self.root:
+            raise ValueError(f"refusing to remove {path}: it is not inside the cache {self.root}")
+        trash = os.path.join(self.root, "tmp", "trash-" + uuid.uuid4().hex)
+        os.makedirs(os.path.dirname(trash), exist_ok=True)
+        try:
+            os.rename(path, trash)
+        except FileNotFoundError:
+            return
+        shutil.rmtree(trash, ignore_errors=True)
+
     # queries -----------------------------------------------------------------------------------
     def has(self, key: str) -> bool:
-        """True when the entry is complete (its manifest exists)."""
-        return os.path.exists(self.manifest_path(key))
+        """True when the entry is complete: its manifest is readable and matches its checksum, and every
+        array folder and file it lists is present (file sizes checked; contents are checked on read)."""
+        manifest = self.manifest(key)
+        if manifest is None:
+            return False
+        problem = self._missing_parts(key, manifest)
+        if problem:
+            self._warn_unusable(key, problem)
+            return False
+        return True
 
     def manifest(self, key: str) -> dict | None:
+        """The entry's manifest, or None when it is missing or unusable (warned once, see :meth:`has`)."""
+        path = self.manifest_path(key)
         try:
-            with open(self.manifest_path(key), encoding="utf-8") as fh:
-                return json.load(fh)
-        except FileNotFoundError:
+            st = os.stat(path)
+        except OSError:
             return None
-        except json.JSONDecodeError:
+        hit = _MANIFESTS.get(path)
+        if hit is not None and hit[0] == (st.st_size, st.st_mtime_ns):
+            return hit[1]
+        doc, problem = _read_json_bytes(path)
+        if doc is _ABSENT:
             return None
+        if problem is None:
+            problem = _manifest_problem(doc, key)
+        if problem is not None:
+            self._warn_unusable(key, f"its manifest {problem}")
+            return None
+        _MANIFESTS[path] = ((st.st_size, st.st_mtime_ns), doc)
+        return doc
+
+    def left_out(self, key: str) -> list[list[str]]:
+        """The items a stored result was computed without (``[[task key, failed task, item, why], ...]``, empty for a
+        complete result; see worker.run_task): recorded in the manifest's ``info``."""
+        manifest = self.manifest(key)
+        return list(manifest["info"].get("left_out", [])) if manifest is not None else []
+
+    def _missing_parts(self, key: str, manifest: dict) -> str | None:
+        """What is wrong with the first array or file of the entry that is absent or has another size, else None."""
+        for name in manifest["arrays"]:
+            if not os.path.isdir(os.path.join(self.object_path(key), name + ".zarr")):
+                return f"array {name} is missing"
+        for rel, meta in manifest["files"].items():
+            try:
+                if os.path.getsize(os.path.join(self.files_path(key), rel)) != meta["size"]:
+                    return f"published file {rel} was changed"
+            except OSError:
+                return f"published file {rel} is missing"
+        return None
+
+    def _warn_unusable(self, key: str, problem: str) -> None:
+        if self.warn:
+            info = ""
+            hit = _MANIFESTS.get(self.manifest_path(key))
+            if hit is not None:
+                meta = hit[1].get("info", {})
+                info = f" ({meta.get('stage', '')}{'[' + meta['label'] + ']' if meta.get('label') else ''})"
+            warn_once(f"cache entry {self.manifest_path(key)}{info}: {problem}; treating it as missing and "
+                      "recomputing it")
 
     def invalidate(self, key: str) -> None:
         """Forget an entry (its manifest), so the next run recomputes it."""
         _READ_CACHE.drop(key)
+        _MANIFESTS.pop(self.manifest_path(key), None)
         try:
             os.remove(self.manifest_path(key))
         except FileNotFoundError:
@@ -184,11 +398,15 @@ class Store:
             for dirpath, _, filenames in os.walk(files_dir):
                 for fn in filenames:
                     full = os.path.join(dirpath, fn)
-                    files[os.path.relpath(full, files_dir)] = file_checksum(full)
+                    files[os.path.relpath(full, files_dir)] = {"sha": file_checksum(full),
+                                                               "size": os.path.getsize(full)}
             self._move_into_place(files_dir, self.files_path(key))
         manifest = {"format": FORMAT_VERSION, "key": key, "created": time.time(), "tree": tree,
                     "arrays": checksums, "files": files, "info": info or {}}
-        atomic_write_text(self.manifest_path(key), json.dumps(manifest, default=_json_default))
+        manifest = json.loads(json.dumps(manifest, default=_json_default))  # the form a reader sees
+        manifest["checksum"] = digest_json({k: manifest[k] for k in _MANIFEST_FIELDS})
+        _MANIFESTS.pop(self.manifest_path(key), None)
+        atomic_write_text(self.manifest_path(key), json.dumps(manifest))
         return manifest
 
     def _move_into_place(self, src: str, dst: str) -> None:
@@ -217,7 +435,7 @@ class Store:
         """
         import zarr
 
-        signature = _files_signature(self.object_path(key))
+        signature = (_stat_signature(self.manifest_path(key)), _files_signature(self.object_path(key)))
         cached = _READ_CACHE.get(key)
         if cached is not None and cached[1] == signature:
             return _copy_arrays(cached[0])
@@ -239,12 +457,18 @@ class Store:
         return _copy_arrays(value)
 
     def verify_files(self, key: str) -> dict[str, str]:
-        """{relative path: absolute path} of the entry's files, each checked against its checksum."""
-        manifest = self.manifest(key) or {}
+        """{relative path: absolute path} of the entry's files, each checked against its checksum.
+
+        Raises:
+            CorruptEntry: the manifest is unusable, or a file is missing or changed.
+        """
+        manifest = self.manifest(key)
+        if manifest is None:
+            raise CorruptEntry(key, "manifest missing or unreadable")
         out = {}
-        for rel, sha in manifest.get("files", {}).items():
+        for rel, meta in manifest["files"].items():
             full = os.path.join(self.files_path(key), rel)
-            if not os.path.isfile(full) or file_checksum(full) != sha:
+            if not os.path.isfile(full) or file_checksum(full) != meta["sha"]:
                 raise CorruptEntry(key, f"published file {rel} is missing or changed")
             out[rel] = full
         return out
@@ -254,13 +478,41 @@ class Store:
         base = os.path.join(self.root, "manifest")
         keys = []
         for dirpath, _, filenames in os.walk(base):
-            keys.extend(fn[:-5] for fn in filenames if fn.endswith(".json"))
+            keys.extend(fn[:-5] for fn in filenames if fn.endswith(".json") and KEY_PATTERN.match(fn[:-5]))
         return keys
 
     def remove(self, key: str) -> None:
         self.invalidate(key)
         shutil.rmtree(self.object_path(key), ignore_errors=True)
         shutil.rmtree(self.files_path(key), ignore_errors=True)
+
+
+def _manifest_problem(doc: Any, key: str) -> str | None:
+    """Why a parsed manifest cannot be trusted (None when it can)."""
+    if not isinstance(doc, dict) or any(f not in doc for f in _MANIFEST_FIELDS + ("checksum",)):
+        return "is incomplete"
+    if doc["format"] != FORMAT_VERSION:
+        return f"has format {doc['format']!r} (this engine writes {FORMAT_VERSION})"
+    if doc["key"] != key:
+        return "belongs to another entry"
+    if digest_json({k: doc[k] for k in _MANIFEST_FIELDS}) != doc["checksum"]:
+        return "does not match its checksum (edited or damaged)"
+    if not (isinstance(doc["arrays"], dict) and isinstance(doc["files"], dict)
+            and all(isinstance(m, dict) and {"sha", "size"} <= set(m) for m in doc["files"].values())):
+        return "is malformed"
+    return None
+
+
+# validated manifests of this process: path -> ((size, mtime_ns), manifest)
+_MANIFESTS: dict[str, tuple[tuple[int, int], dict]] = {}
+
+
+def _stat_signature(path: str) -> tuple | None:
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_size, st.st_mtime_ns
 
 
 def _files_signature(path: str) -> tuple:

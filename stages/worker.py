@@ -1,100 +1,209 @@
 """What runs on a dask worker: load a task's inputs from the store, call the function, store the result.
 
-A task never raises to dask: it returns a small status dict, so one failing item is reported with its
+A task never raises to dask: it returns a :class:`TaskResult`, so one failing item is reported with its
 name while the others finish, and dependents of a failed task are skipped rather than crashed.
 """
 from __future__ import annotations
 
+import enum
 import os
 import shutil
 import time
 import traceback
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from . import registry
 from .errors import CorruptEntry
+from .inputs import DictInput, InputError, InputSpec, PairsInput, StackInput, ValueInput, partial_tile
 from .store import Store
 
 
-def load_input(store: Store, spec: dict) -> Any:
-    """Materialize one input spec (see plan.py) into the value the function receives."""
-    kind = spec["kind"]
-    if kind == "value":
-        return spec["value"]
-    if kind == "entry":
-        return store.get(spec["key"])  # the store keeps a per-process cache of decoded entries
-    if kind == "dict":
-        return {name: load_input(store, s) for name, s in spec["items"].items()}
-    if kind == "stack":
-        return np.stack([np.asarray(load_input(store, s)) for s in spec["parts"]])
-    if kind == "pairs":
-        return assemble_pairs(store, spec)
-    raise ValueError(f"unknown input kind {kind}")
+class TaskStatus(enum.Enum):
+    """What happened to one task."""
+    OK = "ok"              # executed and stored
+    CACHED = "cached"      # already stored (by another run, meanwhile)
+    FAILED = "failed"      # the function raised, or its result cannot be stored
+    SKIPPED = "skipped"    # an upstream task did not succeed
+    CORRUPT = "corrupt"    # an input entry failed its checksum: the client invalidates and recomputes it
+
+    @property
+    def succeeded(self) -> bool:
+        return self in (TaskStatus.OK, TaskStatus.CACHED)
 
 
-def assemble_pairs(store: Store, spec: dict) -> dict:
-    """The full (N, N, ...) matrix of a pair stage from its upper-triangle tiles.
+@dataclass(frozen=True)
+class TaskCall:
+    """Everything a worker needs to execute one task (sent to it by the executor)."""
+    key: str
+    stage: str
+    label: str
+    function: str
+    params: dict
+    inputs: dict[str, InputSpec]
+    item_name: str | None
+    cache: str                  # the store's root folder
+    display: str                # "stage[label]"
 
-    Returns {"names": [N names], "matrix": (N, N, ...) array}; lower tiles come from the function's mirror.
+
+@dataclass(frozen=True)
+class TaskResult:
+    """The outcome of one task: its status and, when it did not succeed, why."""
+    key: str
+    stage: str
+    label: str
+    status: TaskStatus
+    display: str = ""
+    seconds: float = 0.0        # time spent in the function
+    error: str = ""             # FAILED / CORRUPT: one line naming the problem
+    traceback: str = ""         # FAILED: the function's traceback
+    because: str = ""           # SKIPPED: the upstream task that did not succeed
+    corrupt_key: str = ""       # CORRUPT: the input entry to recompute
+    left_out: tuple[tuple[str, str, str, str], ...] = ()  # OK/CACHED: items computed without (left_out_items)
+
+    def with_status(self, status: TaskStatus, **changes: Any) -> "TaskResult":
+        return replace(self, status=status, **changes)
+
+
+def load_inputs(store: Store, inputs: dict[str, InputSpec], upstream: tuple = ()) -> dict[str, Any]:
+    """The values the function receives for each input argument (CorruptEntry when an entry is damaged).
+
+    upstream: the results of the upstream tasks run with this one. The items of a collection input (dict,
+    stack) whose upstream task did not succeed are left out (a stack that keeps none is None); a pairs input
+    leaves out the items its tiles were computed without (see left_out_items)."""
+    results = [u for u in upstream if isinstance(u, TaskResult)]
+    failed = {u.key: u for u in results if not u.status.succeeded}
+    out = {}
+    for arg, spec in inputs.items():
+        if isinstance(spec, DictInput):
+            out[arg] = {name: s.load(store) for name, s in spec.items.items() if _usable(s, failed)}
+        elif isinstance(spec, StackInput):
+            kept = [np.asarray(s.load(store)) for s in spec.parts if _usable(s, failed)]
+            out[arg] = np.stack(kept) if kept else None
+        elif isinstance(spec, PairsInput):
+            tiles = set(spec.deps())
+            drop = frozenset(e[2] for u in results if u.key in tiles for e in u.left_out)
+            out[arg] = spec.load(store, drop=drop)
+        else:
+            out[arg] = spec.load(store)
+    return out
+
+
+def _usable(spec: InputSpec, failed: dict[str, "TaskResult"]) -> bool:
+    return not (set(spec.deps()) & failed.keys()) and not (isinstance(spec, ValueInput) and spec.error)
+
+
+class _Skip(Exception):
+    """The task cannot run: an input it needs as a whole did not succeed (or no item of a collection did)."""
+
+    def __init__(self, because: str, error: str):
+        self.because, self.error = because, error
+
+
+def _why(up: "TaskResult") -> str:
+    return up.error or (f"skipped because {up.because} did not succeed" if up.because else up.status.value)
+
+
+def _root(up: "TaskResult") -> str:
+    """The task that failed first: a skipped task names the one it was skipped for."""
+    return up.because if up.status is TaskStatus.SKIPPED and up.because else (up.display or up.stage)
+
+
+def left_out_items(call: TaskCall, upstream: tuple) -> tuple[tuple[str, str, str, str], ...]:
+    """The items this task is computed without, as (task key, failed task, item, why), sorted: the key of the
+    upstream task it lost, the task that failed first ("views[s003]"), the item name and the error.
+
+    An item of a collection input (``views[*]``, a pair tile's stacks) whose upstream task failed or was
+    skipped, or whose dataset entry is unusable (e.g. a missing view), is left out; the items an upstream
+    result was computed without are inherited. Raises _Skip when a non-collection input did not succeed, a
+    pairs input lost a whole tile, or a collection has no item left.
     """
-    fn = registry.get(spec["mirror"])
-    names, blocks = spec["names"], spec["blocks"]
-    n = len(names)
-    matrix = None
-    for bi, bj, key in spec["tiles"]:
-        block = np.asarray(store.get(key))
-        (s0, e0), (s1, e1) = blocks[bi], blocks[bj]
-        if matrix is None:
-            matrix = np.full((n, n) + block.shape[2:], np.nan, dtype=block.dtype)
-        matrix[s0:e0, s1:e1] = block
-        if bi != bj:
-            matrix[s1:e1, s0:e0] = fn.mirror(block) if fn.mirror is not None else np.swapaxes(block, 0, 1)
-    if matrix is None:
-        matrix = np.zeros((0, 0))
-    return {"names": list(names), "matrix": matrix}
+    results = [u for u in upstream if isinstance(u, TaskResult)]
+    failed = {u.key: u for u in results if not u.status.succeeded}
+    entries = {e for u in results if u.status.succeeded for e in u.left_out}
+    for arg, spec in call.inputs.items():
+        bad = set(spec.deps()) & failed.keys()
+        if isinstance(spec, (DictInput, StackInput)):
+            parts = list(spec.items.items()) if isinstance(spec, DictInput) else [("", p) for p in spec.parts]
+            for name, part in parts:
+                for k in sorted(set(part.deps()) & bad):
+                    up = failed[k]
+                    entries.add((k, _root(up), name or up.label, _why(up)))
+                if isinstance(part, ValueInput) and part.error:
+                    entries.add(("", f"{arg}[{name}]", name, part.error))
+            if isinstance(spec, DictInput) and parts and not any(_usable(p, failed) for _, p in parts):
+                raise _Skip(arg, f"no item of input '{arg}' succeeded")
+        elif bad:
+            up = failed[sorted(bad)[0]]
+            raise _Skip(_root(up), _why(up))
+    wired = {k for spec in call.inputs.values() for k in spec.deps()}
+    for k in sorted(failed.keys() - wired):  # an upstream task no input names: nothing can be left out
+        raise _Skip(_root(failed[k]), _why(failed[k]))
+    return tuple(sorted(entries))
 
 
-def run_task(spec: dict, *upstream: dict) -> dict:
-    """Execute one task described by ``spec`` (from execute.task_spec); returns a status dict.
+def run_task(call: TaskCall, *upstream: TaskResult) -> TaskResult:
+    """Execute one task; never raises (see :class:`TaskStatus` for the outcomes).
 
-    status: "ok" | "cached" (someone else stored it meanwhile) | "failed" | "skipped" (an upstream task
-    failed) | "corrupt" (an input entry failed its checksum: the client recomputes it).
+    One bad item does not sink a collection: a task whose collection input has items that failed upstream
+    runs on the others, and records which items it left out and why (``TaskResult.left_out``, and the
+    ``left_out`` of its manifest ``info``; see :func:`left_out_items`). A result computed without some items
+    is run again once those items are retried (Plan.missing): cached at once if the same items fail again.
     """
-    base = {"key": spec["key"], "stage": spec["stage"], "label": spec["label"], "seconds": 0.0}
-    for up in upstream:
-        if isinstance(up, dict) and up.get("status") not in ("ok", "cached"):
-            return {**base, "status": "skipped", "because": up.get("display", up.get("stage"))}
-    store = Store(spec["cache"])
-    if store.has(spec["key"]):
-        return {**base, "status": "cached"}
-    fn = registry.get(spec["function"])
+    base = TaskResult(call.key, call.stage, call.label, TaskStatus.OK, display=call.display)
     try:
-        inputs = {arg: load_input(store, s) for arg, s in spec["inputs"].items()}
+        left_out = left_out_items(call, upstream)
+    except _Skip as skip:
+        return base.with_status(TaskStatus.SKIPPED, because=skip.because, error=skip.error)
+    failed = {u.key: u for u in upstream if isinstance(u, TaskResult) and not u.status.succeeded}
+    store = Store(call.cache, warn=False)  # the client warns about unusable entries
+    if store.has(call.key):
+        stored = tuple(tuple(e) for e in store.left_out(call.key))
+        if stored == left_out:  # complete, or left out the same items as now
+            return base.with_status(TaskStatus.CACHED, left_out=stored)
+    fn = registry.get(call.function)
+    try:
+        inputs = load_inputs(store, call.inputs, upstream)
     except CorruptEntry as exc:
-        return {**base, "status": "corrupt", "corrupt_key": exc.key, "error": str(exc)}
-    kwargs = dict(spec["params"])
+        return base.with_status(TaskStatus.CORRUPT, corrupt_key=exc.key, error=str(exc))
+    except InputError as exc:
+        return base.with_status(TaskStatus.FAILED, error=f"{type(exc).__name__}: {exc}")
+    kwargs = dict(call.params)
     if "item_name" in fn.engine_args:
-        kwargs["item_name"] = spec["item_name"]
+        kwargs["item_name"] = call.item_name
     out_dir = None
     if "out_dir" in fn.engine_args:
         out_dir = store.tmp_dir()
         kwargs["out_dir"] = out_dir
     t0 = time.perf_counter()
     try:
-        value = fn.func(**inputs, **kwargs)
+        value = _call(fn, call, inputs, kwargs, failed)
     except Exception as exc:  # reported per item; the other tasks go on
         if out_dir:
             shutil.rmtree(out_dir, ignore_errors=True)
-        return {**base, "status": "failed", "error": f"{type(exc).__name__}: {exc}",
-                "traceback": traceback.format_exc(limit=8), "seconds": time.perf_counter() - t0}
+        return base.with_status(TaskStatus.FAILED, error=f"{type(exc).__name__}: {exc}",
+                                traceback=traceback.format_exc(limit=8), seconds=time.perf_counter() - t0)
     seconds = time.perf_counter() - t0
     try:
-        store.put(spec["key"], value, info={"stage": spec["stage"], "label": spec["label"],
-                                            "function": spec["function"], "seconds": seconds,
-                                            "pid": os.getpid()}, files_dir=out_dir)
+        store.put(call.key, value, info={"stage": call.stage, "label": call.label, "function": call.function,
+                                         "seconds": seconds, "pid": os.getpid(),
+                                         "left_out": [list(e) for e in left_out]}, files_dir=out_dir)
     except TypeError as exc:
-        return {**base, "status": "failed", "error": f"result of {spec['function']} cannot be stored: {exc}",
-                "seconds": seconds}
-    return {**base, "status": "ok", "seconds": seconds}
+        return base.with_status(TaskStatus.FAILED, error=f"result of {call.function} cannot be stored: {exc}",
+                                seconds=seconds)
+    return base.with_status(TaskStatus.OK, seconds=seconds, left_out=left_out)
+
+
+def _call(fn: registry.StageFunction, call: TaskCall, inputs: dict[str, Any], kwargs: dict,
+          failed: dict[str, TaskResult]) -> Any:
+    """Call the function; a pair tile with left-out items is computed on the kept items and stored with their
+    positions (inputs.partial_tile), or not computed at all when A or B kept none."""
+    if fn.fanout != "pair":
+        return fn.func(**inputs, **kwargs)
+    kept = {arg: [i for i, p in enumerate(call.inputs[arg].parts) if _usable(p, failed)] for arg in ("A", "B")}
+    if all(len(kept[a]) == len(call.inputs[a].parts) for a in ("A", "B")):
+        return fn.func(**inputs, **kwargs)
+    block = fn.func(**inputs, **kwargs) if kept["A"] and kept["B"] else None
+    return partial_tile(block, kept["A"], kept["B"])

@@ -7,7 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from tests.helpers import COURSE_DATA
+from tests.helpers import COURSE_DATA, SYNTHETIC_PLUGIN
+
+# The synthetic.* stage functions are a test-only plugin, loaded through the STAGES_PLUGINS development hook
+# (in this process and in the dask workers and CLI subprocesses it starts, which inherit the environment).
+os.environ["STAGES_PLUGINS"] = ",".join(filter(None, [os.environ.get("STAGES_PLUGINS", ""), SYNTHETIC_PLUGIN]))
 
 
 @pytest.fixture(scope="session")

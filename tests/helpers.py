@@ -9,6 +9,14 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 COURSE_DATA = ROOT.parent / "shared" / "data" / "hw3"
+SYNTHETIC_PLUGIN = "tests.stages.synthetic_plugin"   # the test-only stage functions (synthetic.*)
+
+
+def plugins_env(*modules: str) -> dict[str, str]:
+    """Environment for a ``python -m stages`` subprocess that loads the synthetic test plugin and ``modules``
+    (the STAGES_PLUGINS development hook), with this checkout importable."""
+    return {"STAGES_PLUGINS": ",".join((SYNTHETIC_PLUGIN, *modules)),
+            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
 
 SYNTHETIC_YAML = """\
 name: syn
@@ -50,10 +58,9 @@ def make_project(tmp: Path, n: int = 12, yaml_text: str = SYNTHETIC_YAML) -> Pat
 
 
 def cli(args: list[str], cwd: Path, env: dict | None = None, timeout: float = 300, **kw) -> subprocess.CompletedProcess:
-    """Run ``python -m stages ARGS`` in ``cwd``."""
-    full_env = dict(os.environ)
-    full_env["PYTHONPATH"] = os.pathsep.join([str(ROOT), full_env.get("PYTHONPATH", "")])
-    full_env.update(env or {})
+    """Run ``python -m stages ARGS`` in ``cwd`` with the synthetic test plugin loaded; ``env`` overrides
+    (e.g. ``{"STAGES_PLUGINS": ""}`` for what production sees)."""
+    full_env = {**os.environ, **plugins_env(), **(env or {})}
     return subprocess.run([sys.executable, "-m", "stages", *args], cwd=cwd, env=full_env, capture_output=True,
                           text=True, timeout=timeout, **kw)
 
@@ -129,3 +136,25 @@ def sphere(n=1500, seed=0):
     flip = np.einsum("ij,ij->i", nrm, V[F].mean(1)) < 0
     F[flip] = F[flip][:, ::-1]
     return V, F
+
+
+def planted_pair_costs(N=12, V=8, D=20, noise=0.2, seed=0):
+    """Pair costs C (N,N,V) float32 of noisy copies of one random shape rotated by planted offsets (N,) int
+    (shape i's views rolled by offsets[i]): the alignment solvers should recover the offsets up to one shift."""
+    import numpy as np
+
+    from corr_core.alignment.pair_costs import pair_costs
+
+    rng = np.random.default_rng(seed)
+    base = rng.normal(size=(V, D))
+    offsets = rng.integers(0, V, size=N)
+    F = np.stack([np.roll(base + noise * rng.normal(size=(V, D)), o, axis=0) for o in offsets])
+    return pair_costs(F), offsets
+
+
+def normalized_distances(X):
+    """(k,k) Euclidean distances between the rows of X: (k,d), divided by the largest one."""
+    import numpy as np
+
+    D = np.linalg.norm(X[:, None] - X[None], axis=2)
+    return D / D.max()

@@ -8,7 +8,15 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["labels_to_angles", "circular_distance", "agreement_up_to_offset", "relabel_by_offset"]
+from corr_core.geometry.primitives import rotate_about_y
+
+__all__ = ["labels_to_angles", "circular_distance", "agreement_up_to_offset", "relabel_by_offset",
+           "aligned_view_index", "align_vertices", "align_vertices_deg", "UP_AXES", "to_y_up"]
+
+# the rotation taking each declared up axis to +y (proper rotations: no mirroring)
+UP_AXES = {"y": np.eye(3),
+           "z": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),    # about x by -90 deg: +z -> +y
+           "x": np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])}    # about z by +90 deg: +x -> +y
 
 
 def labels_to_angles(labels: np.ndarray, V: int) -> np.ndarray:
@@ -44,3 +52,28 @@ def agreement_up_to_offset(labels_a: np.ndarray, labels_b: np.ndarray, V: int,
 def relabel_by_offset(labels: np.ndarray, offset: int, V: int) -> np.ndarray:
     """(labels + offset) % V: the same alignment expressed in a frame rotated by ``offset`` steps."""
     return (np.asarray(labels, dtype=np.int64) + int(offset)) % V
+
+
+def aligned_view_index(label: int, V: int, k: int = 0) -> int:
+    """Index of the original view that is view ``k`` of the common frame for a shape with label ``label``."""
+    return int((k + label) % V)
+
+
+def align_vertices(points: np.ndarray, label: int, V: int) -> np.ndarray:
+    """points: (n,3) of a shape with label ``label`` rotated into the common frame (by -label steps about +y)."""
+    return rotate_about_y(points, -2 * np.pi * int(label) / V)
+
+
+def align_vertices_deg(points: np.ndarray, angle_deg: float) -> np.ndarray:
+    """points: (n,3) of a shape at continuous azimuth ``angle_deg`` rotated into the common frame (by -angle
+    about +y); equals ``align_vertices`` when angle_deg = label * 360 / V."""
+    return rotate_about_y(points, -np.deg2rad(float(angle_deg)))
+
+
+def to_y_up(points: np.ndarray, up: str = "y") -> np.ndarray:
+    """points: (n,3) of a shape stored with ``up`` ("x", "y" or "z") as its up axis, rotated so that it is +y
+    (the frame the views and azimuths use). ValueError naming the accepted axes otherwise."""
+    if up not in UP_AXES:
+        raise ValueError(f"up axis {up!r} is not one of {sorted(UP_AXES)} (the axis the collection stores as up)")
+    points = np.asarray(points)
+    return points if up == "y" else points @ UP_AXES[up].T

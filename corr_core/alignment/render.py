@@ -26,28 +26,7 @@ import functools
 import numpy as np
 
 from corr_core._open3d import load_open3d
-
-
-def rotation_about_y(angle_rad: float) -> np.ndarray:
-    """Return the (3, 3) right-handed rotation by ``angle_rad`` about +y (+angle turns +x toward -z)."""
-    c, s = np.cos(angle_rad), np.sin(angle_rad)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
-def rotate_about_y(V: np.ndarray, angle_rad: float) -> np.ndarray:
-    """Rotate points about the y axis through the origin.
-
-    Args:
-        V: (n, 3) float points.
-        angle_rad: rotation angle in radians; +angle turns +x toward -z (standard Ry matrix).
-    Returns:
-        (n, 3) rotated points, same dtype as ``V`` for float input.
-    """
-    V = np.asarray(V)
-    if V.ndim != 2 or V.shape[1] != 3:
-        raise ValueError(f"V must be (n, 3), got shape {V.shape}")
-    out_dtype = V.dtype if np.issubdtype(V.dtype, np.floating) else np.float64
-    return (V @ rotation_about_y(angle_rad).T).astype(out_dtype, copy=False)
+from corr_core.geometry.primitives import face_normals, rotate_about_y, rotation_about_y  # noqa: F401 (re-exported)
 
 
 def camera_frames(n_views: int = 16, elevation_deg: float = 20.0) -> np.ndarray:
@@ -102,14 +81,6 @@ def _cached_view_rays(n_views: int, image_size: int, elevation_deg: float, margi
     return load_open3d().core.Tensor(view_rays(n_views, image_size, elevation_deg, margin))
 
 
-def face_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Return (m, 3) float32 unit face normals; degenerate faces get a zero normal."""
-    V = np.asarray(V, dtype=np.float64)
-    normals = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0).astype(np.float32)
-
-
 def render_views(
     V: np.ndarray,
     F: np.ndarray,
@@ -159,7 +130,7 @@ def render_views(
 
     # the headlight direction is constant per view: |n . d| for every (face, view) pair at once
     backs = camera_frames(n_views, elevation_deg)[:, 2].astype(np.float32)  # -d per view
-    cosine = np.abs(np.einsum("fi,vi->fv", face_normals(V, F), backs))  # (m, n_views)
+    cosine = np.abs(np.einsum("fi,vi->fv", face_normals(V, F).astype(np.float32), backs))  # (m, n_views)
     shade = ambient + diffuse * cosine
     images = np.ones((n_views, size, size), np.float32)
     images[hit] = shade[face[hit], view_of_hit]

@@ -17,7 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from corr_core.alignment.pair_costs import CirculantPairwise, _symmetrize_costs, auto_sigma
+from corr_core.alignment.circulant import CirculantPairwise, symmetrize_costs
+from corr_core.alignment.pair_costs import auto_sigma
 
 __all__ = ["sync_matrix", "spectral_sync", "spectral_sync_operator", "round_phases", "projected_power"]
 
@@ -127,10 +128,7 @@ def _centered_score_operator(C: np.ndarray, sigma: float, score: str, neighbors)
     if score == "kernel":
         S = base.K
         S -= S.mean(axis=2, keepdims=True, dtype=np.float64).astype(S.dtype)
-        op = CirculantPairwise.__new__(CirculantPairwise)  # S is a fresh array: wrap it without copying
-        op._init_dense(S)
-        op.sigma = float(sigma)
-        return op
+        return CirculantPairwise.from_kernel(S, sigma=sigma, copy=False)  # S is a fresh array: no copy
     del base
-    S = -_symmetrize_costs(C) / sigma
+    S = -symmetrize_costs(C) / sigma
     return CirculantPairwise.from_kernel(S - S.mean(axis=2, keepdims=True))

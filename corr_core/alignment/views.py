@@ -1,7 +1,9 @@
 """Load the course's pre-rendered views (``NNN_V.png``) as square grayscale images.
 
 Course format: one PNG per (item, view), named ``<item>_<view>.png`` (e.g. ``007_12.png``), palette
-or RGB, cropped to the object (sizes vary), background pure blue (0, 0, 255). Loading maps the
+or RGB, cropped to the object (sizes vary), background pure blue (0, 0, 255). A grayscale view (``L``, ``LA``,
+e.g. a course view converted to gray: blue became gray 29) has no blue: its background is the most frequent
+border gray (the object touches the border of a cropped view only at a few pixels). Loading maps the
 background to white, converts to grayscale (ITU-R 601 luma, [0, 1]), pads to a square (object
 centred, white padding) and resizes to ``size`` x ``size`` with an anti-aliasing filter, giving images
 that match ``corr_core.alignment.render.render_views`` (dark object on white).
@@ -16,6 +18,7 @@ import numpy as np
 from PIL import Image
 
 BACKGROUND_RGB = (0, 0, 255)
+GRAY_MODES = ("1", "L", "LA", "La", "I", "I;16", "F")  # PIL modes without colour
 _VIEW_NAME = re.compile(r"^(?P<item>.+)_(?P<view>\d+)\.png$", re.IGNORECASE)
 
 
@@ -33,6 +36,23 @@ def to_gray_white_background(rgb: np.ndarray, background=BACKGROUND_RGB) -> np.n
     is_background = np.all(rgb[..., :3] == np.asarray(background, dtype=rgb.dtype), axis=-1)
     gray[is_background] = 1.0
     return np.clip(gray, 0.0, 1.0)
+
+
+def background_color(rgb: np.ndarray, mode: str = "RGB") -> tuple[int, int, int]:
+    """The background colour of a view: pure blue (0, 0, 255) for a colour view (palette, RGB, RGBA), the most
+    frequent colour of the image border for a grayscale one (ties: the smallest).
+
+    Args:
+        rgb: (H, W, 3) uint8 image (after conversion to RGB); mode: the PIL mode of the file ("L", "P", ...).
+    Returns:
+        the RGB triple to treat as background.
+    """
+    if mode not in GRAY_MODES:
+        return BACKGROUND_RGB
+    rgb = np.asarray(rgb)[..., :3]
+    border = np.concatenate([rgb[0], rgb[-1], rgb[:, 0], rgb[:, -1]])
+    colors, counts = np.unique(border, axis=0, return_counts=True)
+    return tuple(int(c) for c in colors[int(np.argmax(counts))])
 
 
 def pad_to_square(image: np.ndarray, fill: float = 1.0) -> np.ndarray:
@@ -76,7 +96,8 @@ def load_view_image(path: str | os.PathLike, size: int = 120) -> np.ndarray:
     """Load one course view as a (size, size) float32 grayscale image, white background.
 
     Args:
-        path: PNG path (palette or RGB; background (0, 0, 255)).
+        path: PNG path (palette or RGB with background (0, 0, 255); grayscale or other colour views: the
+            background is the most frequent border colour, see ``background_color``).
         size: output side in pixels.
     Returns:
         (size, size) float32 in [0, 1].
@@ -88,10 +109,12 @@ def load_view_image(path: str | os.PathLike, size: int = 120) -> np.ndarray:
         raise FileNotFoundError(f"view image not found: {path}")
     try:
         with Image.open(path) as handle:
+            mode = handle.mode
             rgb = np.asarray(handle.convert("RGB"))
     except Exception as error:  # PIL raises several types (UnidentifiedImageError, OSError, ...)
         raise ValueError(f"cannot read view image {path}: {error}") from error
-    return resize_square(pad_to_square(to_gray_white_background(rgb)), size)
+    gray = to_gray_white_background(rgb, background_color(rgb, mode))
+    return resize_square(pad_to_square(gray), size)
 
 
 def load_view_stack(paths: list[str | os.PathLike], size: int = 120) -> np.ndarray:

@@ -7,6 +7,16 @@ import warnings
 import numpy as np
 
 
+def _check_unique(path: str, ids: list[int], line_nos: list[int]) -> None:
+    """Raise ValueError naming the file and both lines when a vertex id appears twice."""
+    first_line: dict[int, int] = {}
+    for vid, line_no in zip(ids, line_nos):
+        if vid in first_line:
+            raise ValueError(f"{path}:{line_no}: vertex id {vid} is listed twice (first on line "
+                             f"{first_line[vid]}); each landmark must be a different vertex: remove or fix one")
+        first_line[vid] = line_no
+
+
 def read_landmarks(path: str | os.PathLike, n_vertices: int | None = None) -> tuple[np.ndarray, list[str]]:
     """Read landmark vertex ids and names.
 
@@ -25,7 +35,9 @@ def read_landmarks(path: str | os.PathLike, n_vertices: int | None = None) -> tu
         ids: (k,) int64 0-based vertex ids, in file order.
         names: list of k names.
     Raises:
-        ValueError: unparsable line or id out of range; the message names the file and the (1-based) line.
+        ValueError: unparsable line, id out of range, or the same vertex id twice (two landmarks cannot be one
+        vertex: the truth "landmark i <-> landmark i" would be ambiguous); the message names the file and the
+        (1-based) lines.
     """
     path = os.fspath(path)
     ids: list[int] = []
@@ -46,6 +58,7 @@ def read_landmarks(path: str | os.PathLike, n_vertices: int | None = None) -> tu
             ids.append(vid)
             names.append(name.strip() or None)
             line_nos.append(line_no)
+    _check_unique(path, ids, line_nos)
     arr = np.asarray(ids, dtype=np.int64)
     if n_vertices is not None and len(arr):
         has_n, has_zero = bool(np.any(arr == n_vertices)), bool(np.any(arr == 0))
@@ -65,3 +78,14 @@ def read_landmarks(path: str | os.PathLike, n_vertices: int | None = None) -> tu
             raise ValueError(f"{path}:{line_nos[i]}: vertex id {ids[i]} is out of range 0..{n_vertices - 1}")
     out_names = [nm if nm is not None else str(int(v)) for nm, v in zip(names, arr)]
     return arr, out_names
+
+
+def subset_positions(ids: np.ndarray, subset_ids: np.ndarray, subset_name: str = "subset",
+                     full_name: str = "the landmark list") -> np.ndarray:
+    """(k,) int positions of the vertex ids subset_ids (k,) within ids (L,) (e.g. the sparse landmarks within
+    all landmarks). Raises ValueError naming ``subset_name`` / ``full_name`` for ids missing from ``ids``."""
+    where = {int(v): i for i, v in enumerate(ids)}
+    missing = [int(v) for v in subset_ids if int(v) not in where]
+    if missing:
+        raise ValueError(f"{subset_name}: sparse landmark vertices {missing} are not in {full_name}")
+    return np.array([where[int(v)] for v in subset_ids], dtype=np.int64)

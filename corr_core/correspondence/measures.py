@@ -1,4 +1,5 @@
-"""Evaluating correspondences: landmark accuracy, confusion/frequency matrices, geodesic error curves.
+"""Evaluating correspondences: landmark accuracy, confusion/frequency matrices, per-method reports, geodesic
+error curves and dense-map summaries (figures: ``corr_core.plotting``).
 
 Dense-map measure of Kim, Lipman & Funkhouser 2011 (Blended Intrinsic Maps): for each evaluated point, the
 geodesic distance on the target surface between the predicted and the true image, divided by sqrt(area of
@@ -7,6 +8,9 @@ the target surface); a curve reports the fraction of points whose error is <= ea
 from __future__ import annotations
 
 import numpy as np
+
+from corr_core.geometry.geodesic import GeodesicSolver
+from corr_core.geometry.primitives import surface_area
 
 
 def correspondence_matrix(pred: np.ndarray, n_labels: int) -> np.ndarray:
@@ -41,30 +45,6 @@ def frequency_matrix(matrices) -> np.ndarray:
     return stack.mean(axis=0)
 
 
-def plot_frequency_matrix(freq: np.ndarray, names_rows, names_cols, title: str, path) -> None:
-    """Save a heat map of a (n,L) frequency matrix with names on both axes (PNG or PDF by extension)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    n, L = freq.shape
-    fig, ax = plt.subplots(figsize=(2.0 + 0.38 * L, 1.5 + 0.34 * n))
-    im = ax.imshow(freq, cmap="viridis", vmin=0.0, vmax=max(1.0, float(freq.max())), aspect="equal")
-    ax.set_xticks(range(L), labels=list(names_cols), rotation=60, ha="right", fontsize=8)
-    ax.set_yticks(range(n), labels=list(names_rows), fontsize=8)
-    ax.set_xlabel("test landmark (label)")
-    ax.set_ylabel("template landmark")
-    for i, a in zip(*np.nonzero(freq)):
-        ax.text(a, i, f"{freq[i, a]:.2f}".lstrip("0"), ha="center", va="center", fontsize=6,
-                color="black" if freq[i, a] > 0.6 else "white")
-    ax.set_title(title)
-    fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="fraction of test meshes")
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-
-
 def geodesic_error_curve(errors_normalized: np.ndarray, thresholds: np.ndarray | None = None) -> np.ndarray:
     """Cumulative error curve: fraction of errors <= each threshold.
 
@@ -78,49 +58,75 @@ def geodesic_error_curve(errors_normalized: np.ndarray, thresholds: np.ndarray |
     return np.searchsorted(err, thresholds, side="right") / err.size
 
 
-def plot_error_curves(curves: dict, path, title: str = "Geodesic error (Kim et al. 2011)") -> None:
-    """Save cumulative error curves. curves: {label: (thresholds (T,), fractions (T,))}."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 4.2))
-    colors = plt.get_cmap("tab10" if len(curves) <= 10 else "tab20")
-    for c, (label, (thr, frac)) in enumerate(curves.items()):
-        ax.plot(thr, 100 * np.asarray(frac), label=label, lw=1.8, color=colors(c % colors.N),
-                ls="-" if c < 10 else "--")
-    ax.set_xlabel("geodesic error / sqrt(area)")
-    ax.set_ylabel("% correspondences")
-    ax.set_ylim(0, 100)
-    ax.set_xlim(0, max(float(np.max(t)) for t, _ in curves.values()))
-    ax.grid(alpha=0.3)
-    ax.legend(loc="lower right", fontsize=8)
-    ax.set_title(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-
-
-def surface_area(V: np.ndarray, F: np.ndarray) -> float:
-    """Total triangle area (length^2). V: (n,3); F: (m,3)."""
-    return float(0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum())
-
-
 def geodesic_errors(V: np.ndarray, F: np.ndarray, pred_vids, true_vids) -> np.ndarray:
     """Kim–Lipman–Funkhouser error of predicted vertex images on the target mesh (V, F).
 
     Args: pred_vids, true_vids: (p,) int vertex ids on the target. Returns: (p,) float, geodesic distance
     (heat method) between predicted and true vertex divided by sqrt(surface area); dimensionless.
     """
-    from corr_core.geometry.geodesic import _solver
-
     pred_vids = np.asarray(pred_vids, dtype=np.int64)
     true_vids = np.asarray(true_vids, dtype=np.int64)
-    solver = _solver(V, F)
+    solver = GeodesicSolver(V, F)
     err = np.zeros(len(pred_vids))
     wrong = pred_vids != true_vids
     for t in np.unique(true_vids[wrong]):  # one heat solve per distinct true vertex
         rows = np.flatnonzero(wrong & (true_vids == t))
-        err[rows] = solver.compute_distance(int(t))[pred_vids[rows]]
+        err[rows] = solver.distance(int(t))[pred_vids[rows]]
     return err / np.sqrt(surface_area(V, F))
+
+
+def top_confusions(matrices: list[np.ndarray], rows: list[str], k: int = 10) -> dict[str, int]:
+    """The k most frequent wrong correspondences 'A -> B' (rows[i] -> rows[j], i != j) over binary (n,n)
+    correspondence matrices, with how many matrices (meshes) made them; most frequent first."""
+    counts = np.sum(matrices, axis=0)
+    wrong = {f"{rows[i]} -> {rows[j]}": int(counts[i, j])
+             for i in range(len(rows)) for j in np.flatnonzero(counts[i]) if j != i}
+    return dict(sorted(wrong.items(), key=lambda kv: -kv[1])[:k])
+
+
+def method_report(preds: dict[str, np.ndarray], rows: list[str]) -> dict:
+    """Landmark accuracy of one method over test meshes, the truth being landmark i -> landmark i.
+
+    preds: {mesh: (n,) int predicted landmark per template landmark}; rows: the n landmark names.
+    Returns {"accuracy": mean over meshes, "per_mesh": {mesh: accuracy}, "confusions": ``top_confusions``,
+    "matrices": {mesh: (n,n) 0/1 nested lists}, "frequency": (n,n) float ``frequency_matrix``}.
+    """
+    n = len(rows)
+    mats = [correspondence_matrix(p, n) for p in preds.values()]
+    truth = np.arange(n)
+    per_mesh = {m: float(accuracy(p, truth)) for m, p in preds.items()}
+    return {"accuracy": float(np.mean(list(per_mesh.values()))), "per_mesh": per_mesh,
+            "confusions": top_confusions(mats, rows),
+            "matrices": {m: mat.astype(int).tolist() for m, mat in zip(preds, mats)},
+            "frequency": frequency_matrix(mats)}
+
+
+DENSE_ERROR_THRESHOLDS = np.linspace(0, 0.25, 51)
+
+
+def dense_map_summary(errors: np.ndarray) -> dict:
+    """Fractions of dense-map errors (p,) (geodesic error / sqrt(area)) within 0.05, 0.10 and 0.25, their mean
+    and count."""
+    errors = np.asarray(errors)
+    return {"within_0.05": float(np.mean(errors <= 0.05)), "within_0.10": float(np.mean(errors <= 0.10)),
+            "within_0.25": float(np.mean(errors <= 0.25)), "mean_error": float(errors.mean()),
+            "n_points": int(errors.size)}
+
+
+def identity_truth_problem(n_template_vertices: int | None, n_target_vertices: int | None) -> str | None:
+    """Why "landmark i <-> landmark i" is no ground truth for a test mesh, or None when it is.
+
+    One landmark file names vertex ids for the template and every test mesh; that only names the same points
+    when the meshes share their vertex numbering, so a test mesh with another vertex count has no ground truth
+    (scoring it would average a meaningless accuracy in). None counts are unknown: no objection.
+    """
+    if n_template_vertices is None or n_target_vertices is None or n_template_vertices == n_target_vertices:
+        return None
+    return (f"{n_target_vertices} vertices vs the template's {n_template_vertices}: the landmark vertex ids do not "
+            "name the same points on both meshes, so there is no ground truth; not scored")
+
+
+def scorable_results(results: dict) -> tuple[dict, dict[str, str]]:
+    """Split per-mesh method results {mesh: {..., "no_truth": reason?}} into (scorable, {mesh: reason})."""
+    skipped = {m: r["no_truth"] for m, r in sorted(results.items()) if r.get("no_truth")}
+    return {m: r for m, r in results.items() if m not in skipped}, skipped

@@ -12,10 +12,10 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from corr_core.generate.chairs import canonical_chair, make_chair, rotate_y, write_chair_collection
+from corr_core.generate.chairs import canonical_chair, make_chair, write_chair_collection
 from corr_core.generate.humanoid import make_humanoid_dataset, make_humanoid_rest, write_humanoid_dataset
 
-__all__ = ["make_chair", "canonical_chair", "rotate_y", "write_chair_collection", "make_humanoid_rest",
+__all__ = ["make_chair", "canonical_chair", "write_chair_collection", "make_humanoid_rest",
            "make_humanoid_dataset", "write_humanoid_dataset", "write_default_data"]
 
 

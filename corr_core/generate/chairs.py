@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from corr_core.geometry.mesh_io import save_obj
+from corr_core.geometry.primitives import rotate_about_y
 
 # ---------------------------------------------------------------------------------------------------------------
 # primitives
@@ -120,17 +121,6 @@ def rot_x(angle: float) -> np.ndarray:
     """(3,3) rotation about +x by ``angle`` radians (right-handed)."""
     c, s = np.cos(angle), np.sin(angle)
     return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
-
-
-def rot_y(angle: float) -> np.ndarray:
-    """(3,3) standard Ry: x' = cos a x + sin a z, z' = -sin a x + cos a z."""
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-
-
-def rotate_y(V: np.ndarray, angle: float) -> np.ndarray:
-    """Rotate V: (n,3) about +y by ``angle`` radians (standard Ry, see module docstring)."""
-    return V @ rot_y(angle).T
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -293,31 +283,56 @@ def canonical_chair(seed: int, index: int) -> tuple[np.ndarray, np.ndarray]:
     return make_chair(chair_rng(seed, index), kind=chair_kind(index))
 
 
-def write_chair_collection(out_dir: str | os.PathLike, n: int = 24, seed: int = 0, views: int = 16) -> dict:
+def collection_azimuths(n: int, seed: int, views: int, continuous: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Azimuths of the ``n`` shapes of a collection: (steps (n,) int in 0..views-1, degrees (n,) float).
+
+    Drawn from ``np.random.default_rng([seed, 0])``: steps uniform on 0..views-1 (degrees = steps * 360/views),
+    or with ``continuous`` degrees uniform in [0, 360) and steps = the nearest view (round(deg / step) % views).
+    """
+    rng = np.random.default_rng([seed, 0])
+    if not continuous:
+        steps = rng.integers(0, views, size=n)
+        return steps, steps * 360.0 / views
+    deg = rng.uniform(0.0, 360.0, size=n)
+    return np.rint(deg * views / 360.0).astype(np.int64) % views, deg
+
+
+def write_ground_truth(path: str | os.PathLike, names: list[str], steps: np.ndarray, deg: np.ndarray,
+                       extra: dict[str, list] | None = None, whole_steps: bool = True) -> None:
+    """ground_truth.csv: shape, azimuth_steps (nearest view), azimuth_deg (the exact angle: 6 significant
+    digits for whole view steps, 6 decimals for continuous azimuths), then ``extra`` columns {column: (n,) values}."""
+    extra = extra or {}
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(["shape", "azimuth_steps", "azimuth_deg", *extra])
+        for k, (name, st, d) in enumerate(zip(names, steps, deg)):
+            w.writerow([name, int(st), f"{d:.6g}" if whole_steps else f"{d:.6f}",
+                        *(col[k] for col in extra.values())])
+
+
+def write_chair_collection(out_dir: str | os.PathLike, n: int = 24, seed: int = 0, views: int = 16,
+                           continuous: bool = False) -> dict:
     """Write ``n`` chairs ``001.obj``.. rotated by random known azimuths, plus ``ground_truth.csv``.
 
-    Chair i is ``canonical_chair(seed, i)`` rotated by ``Ry(azimuth_steps[i] * 2*pi/views)``; the steps are
-    uniform on 0..views-1, drawn from ``np.random.default_rng([seed, 0])``.
+    Chair i is ``canonical_chair(seed, i)`` rotated by ``Ry(azimuth_deg[i])``; the azimuths are those of
+    ``collection_azimuths(n, seed, views, continuous)``: whole view steps by default, any angle in [0, 360)
+    with ``continuous`` (azimuth_steps is then the nearest view).
     Returns (JSON-serialisable): {"out_dir", "files": [paths], "names": ["001", ...], "azimuth_steps": [n ints],
     "azimuth_deg": [n floats], "views": views, "ground_truth": path of the csv}.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    steps = np.random.default_rng([seed, 0]).integers(0, views, size=n)
+    steps, deg = collection_azimuths(n, seed, views, continuous)
     names, files = [], []
     for i in range(1, n + 1):
         V, F = canonical_chair(seed, i)
         name = f"{i:03d}"
         path = out / f"{name}.obj"
-        save_obj(path, rotate_y(V, steps[i - 1] * 2 * np.pi / views), F)
+        angle = steps[i - 1] * 2 * np.pi / views if not continuous else np.deg2rad(deg[i - 1])
+        save_obj(path, rotate_about_y(V, angle), F)
         names.append(name)
         files.append(str(path))
-    deg = steps * 360.0 / views
     gt = out / "ground_truth.csv"
-    with open(gt, "w", newline="") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(["shape", "azimuth_steps", "azimuth_deg"])
-        for name, st, d in zip(names, steps, deg):
-            w.writerow([name, int(st), f"{d:g}"])
+    write_ground_truth(gt, names, steps, deg, whole_steps=not continuous)
     return {"out_dir": str(out), "files": files, "names": names, "azimuth_steps": [int(v) for v in steps],
             "azimuth_deg": [float(v) for v in deg], "views": views, "ground_truth": str(gt)}

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from corr_core.geometry.mesh_io import save_obj
+from corr_core.geometry.primitives import largest_component, vertex_adjacency, vertex_normals
 
 ARM_DROP_DEG = 35.0
 
@@ -131,30 +131,6 @@ def _mirror_half(V: np.ndarray, F: np.ndarray, mid: np.ndarray) -> tuple[np.ndar
     return np.concatenate([V, Vm]), np.concatenate([F, mirror_id[F][:, ::-1]])
 
 
-def _vertex_adjacency(F: np.ndarray, n: int) -> sp.csr_matrix:
-    """(n,n) symmetric 0/1 vertex adjacency of triangles F: (m,3)."""
-    i = np.concatenate([F[:, 0], F[:, 1], F[:, 2]])
-    j = np.concatenate([F[:, 1], F[:, 2], F[:, 0]])
-    A = sp.coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n)).tocsr()
-    A = ((A + A.T) > 0).astype(np.float64)
-    return A.tocsr()
-
-
-def _largest_component(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Keep the largest face-connected component; drop unused vertices (order otherwise preserved)."""
-    A = _vertex_adjacency(F, len(V))
-    _, label = connected_components(A, directed=False)
-    used = np.zeros(len(V), bool)
-    used[F.ravel()] = True
-    counts = np.bincount(label[used])
-    keep_label = np.argmax(counts)
-    keepF = F[label[F[:, 0]] == keep_label]
-    keepV = np.zeros(len(V), bool)
-    keepV[keepF.ravel()] = True
-    new_id = np.cumsum(keepV) - 1
-    return V[keepV], new_id[keepF]
-
-
 def _project_to_surface(P: np.ndarray, iters: int = 2, eps: float = 1e-5) -> np.ndarray:
     """Newton-project points P: (n,3) onto the zero set of ``body_sdf`` (forward-difference gradient)."""
     n = len(P)
@@ -182,7 +158,7 @@ def _relax(V: np.ndarray, F: np.ndarray, iters: int = 6, step: float = 0.5) -> n
     Marching cubes on the mirror-symmetric grid gives an exactly symmetric vertex set, but its triangulation is not
     exactly mirrored; averaging each vertex with its mirrored partner after every step keeps the set symmetric.
     """
-    A = _vertex_adjacency(F, len(V))
+    A = vertex_adjacency(F, len(V))
     deg = np.asarray(A.sum(1)).ravel()
     pair = mirror_pairs(V)
     for _ in range(iters):
@@ -193,15 +169,6 @@ def _relax(V: np.ndarray, F: np.ndarray, iters: int = 6, step: float = 0.5) -> n
         if pair is not None:
             V = 0.5 * (V + V[pair] * [-1.0, 1.0, 1.0])
     return V
-
-
-def vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """(n,3) unit area-weighted vertex normals of the mesh V: (n,3), F: (m,3)."""
-    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    N = np.zeros_like(V)
-    for c in range(3):
-        np.add.at(N, F[:, c], fn)
-    return N / np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-300)
 
 
 def make_humanoid_rest(grid_step: float = 0.0225) -> tuple[np.ndarray, np.ndarray]:
@@ -220,7 +187,7 @@ def make_humanoid_rest(grid_step: float = 0.0225) -> tuple[np.ndarray, np.ndarra
     V[mid, 0] = 0.0
     F = F.astype(np.int64)
     F = F[~mid[F].all(1)]  # drop the flat cap on the midplane
-    V, F = _largest_component(V, F)
+    V, F, _ = largest_component(V, F, by="vertices")
     V, F = _mirror_half(V, F, V[:, 0] == 0.0)
     V = _relax(V, F)
     if _signed_volume(V, F) < 0:
@@ -276,7 +243,7 @@ def skinning_weights(V: np.ndarray, F: np.ndarray, smooth_iters: int = 60) -> tu
                   for _, _, _, segs, r in bones], 1)
     W = np.zeros_like(q)
     W[np.arange(len(V)), np.argmin(q, 1)] = 1.0
-    A = _vertex_adjacency(F, len(V))
+    A = vertex_adjacency(F, len(V))
     P = sp.diags(1.0 / np.asarray(A.sum(1)).ravel()) @ A
     for _ in range(smooth_iters):
         W = 0.5 * W + 0.5 * (P @ W)

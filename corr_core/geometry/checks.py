@@ -1,71 +1,35 @@
-"""Checks that a mesh is fit for intrinsic (Laplacian / geodesic) correspondence.
+"""Checks that a mesh is fit for intrinsic (Laplacian / geodesic) correspondence, after ``repair.repair_mesh``.
 
-Errors (``MeshError``): non-manifold edges, degenerate faces, several connected components (unless
-``allow_components``; repair with ``largest_component``), different connectivity where it must be equal.
-Warnings (returned strings): boundary edges, vertices used by no face.
+Errors (``MeshError``): degenerate faces (``repair_mesh`` drops them), several connected components (unless
+``allow_components``), vertices used by no face (unless ``allow_unreferenced``), different connectivity where it
+must be equal. Warnings (returned strings): non-manifold edges (the cotan Laplacian, the heat method and the
+mid-edge flattening still run on them), boundary edges, unreferenced vertices / components when allowed.
 """
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from corr_core.geometry.mesh_io import MeshError, check_mesh
-
-
-def _edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unique undirected edges (e,2) of the triangles and how many faces use each (e,)."""
-    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    return np.unique(E, axis=0, return_counts=True)
-
-
-def face_areas(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """(m,) triangle areas, units length^2."""
-    return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
-
-
-def vertex_components(n_vertices: int, F: np.ndarray) -> tuple[int, np.ndarray]:
-    """Connected components of the vertices joined by faces: (count, labels (n,) int).
-
-    Vertices used by no face form their own singleton components.
-    """
-    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]]])
-    A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n_vertices, n_vertices))
-    return connected_components(A, directed=False)
-
-
-def largest_component(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Keep the face-connected component with the largest surface area (a repair for stray pieces).
-
-    Returns:
-        V2: (n2,3); F2: (m2,3) re-indexed; kept: (n2,) int original ids of the kept vertices (V2 = V[kept]).
-        Note: vertex ids change, so "vertex i matches vertex i" ground truth must be mapped through ``kept``.
-    """
-    _, labels = vertex_components(len(V), F)
-    face_label = labels[F[:, 0]]
-    area = np.bincount(face_label, weights=face_areas(V, F), minlength=labels.max() + 1)
-    best = int(np.argmax(area))
-    F_keep = F[face_label == best]
-    kept = np.unique(F_keep)
-    remap = np.full(len(V), -1, dtype=np.int64)
-    remap[kept] = np.arange(len(kept))
-    return V[kept], remap[F_keep], kept
+from corr_core.geometry.primitives import face_areas, largest_component, unique_edges, vertex_components  # noqa: F401 (re-exported)
 
 
 def check_correspondence_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh",
-                              allow_components: bool = False, area_tol: float = 1e-12) -> list[str]:
+                              allow_components: bool = False, area_tol: float = 1e-12,
+                              allow_unreferenced: bool = True) -> list[str]:
     """Validate a mesh for spectral / geodesic correspondence.
 
     Args:
         V: (n,3) float; F: (m,3) int; name: used in messages (e.g. the file name).
         allow_components: if True, several connected components give a warning instead of an error.
+        allow_unreferenced: if False, vertices used by no face are an error (the heat-method geodesics and the
+            mid-edge flattening need every vertex on the surface).
         area_tol: a face is degenerate when its area <= area_tol * (bounding-box diagonal)^2 or it repeats a
             vertex.
     Returns:
-        list of warning strings (boundary, unreferenced vertices, components when allowed).
+        list of warning strings (non-manifold edges, boundary, unreferenced vertices / components when allowed).
     Raises:
-        MeshError: basic problems (see ``meshio.check_mesh``), non-manifold edges, degenerate faces,
-        several connected components.
+        MeshError: basic problems (see ``mesh_io.check_mesh``), degenerate faces, several connected components,
+        unreferenced vertices (each unless allowed).
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
@@ -73,32 +37,37 @@ def check_correspondence_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh",
     warns: list[str] = []
 
     repeated = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
-    diag2 = float(np.sum((V.max(0) - V.min(0)) ** 2))
+    used_V = V[np.unique(F)]  # unreferenced vertices (maybe far away) must not set the scale
+    diag2 = float(np.sum((used_V.max(0) - used_V.min(0)) ** 2))
     degenerate = repeated | (face_areas(V, F) <= area_tol * max(diag2, np.finfo(float).tiny))
     if degenerate.any():
         ids = np.flatnonzero(degenerate)
         raise MeshError(f"{name}: {len(ids)} degenerate (zero-area) face(s), first: face {int(ids[0])}; "
-                        "the cotan Laplacian is undefined there — remove or repair them")
+                        "the cotan Laplacian is undefined there — load the mesh with repair.repair_mesh, which drops them")
 
-    E, count = _edges(F)
+    E, count = unique_edges(F)
     if np.any(count > 2):
         bad = E[np.flatnonzero(count > 2)[0]]
-        raise MeshError(f"{name}: {int(np.sum(count > 2))} non-manifold edge(s) shared by more than two faces, "
-                        f"first: ({int(bad[0])}, {int(bad[1])})")
+        warns.append(f"{name}: {int(np.sum(count > 2))} non-manifold edge(s) shared by more than two faces, "
+                     f"first: ({int(bad[0])}, {int(bad[1])}); kept (results near them may be less accurate)")
     n_boundary = int(np.sum(count == 1))
     if n_boundary:
         warns.append(f"{name}: {n_boundary} boundary edge(s) (open surface; Laplacian uses Neumann boundary)")
 
     unused = np.setdiff1d(np.arange(len(V)), np.unique(F))
     if len(unused):
-        warns.append(f"{name}: {len(unused)} vertex/vertices used by no face (e.g. {int(unused[0])})")
+        msg = f"{name}: {len(unused)} vertex/vertices used by no face (e.g. {int(unused[0])})"
+        if not allow_unreferenced:
+            raise MeshError(msg + "; the geodesic and flattening methods need every vertex on the surface: "
+                            "remove the unused vertices (or the stray pieces) from the file")
+        warns.append(msg)
 
     used = np.unique(F)
     _, labels = vertex_components(len(V), F)
     n_comp = len(np.unique(labels[used]))
     if n_comp > 1:
         msg = (f"{name}: {n_comp} connected components; intrinsic distances between them are infinite "
-               "(use meshcheck.largest_component to keep the main piece)")
+               "(remove the stray pieces from the file, keeping the largest connected component)")
         if not allow_components:
             raise MeshError(msg)
         warns.append(msg)

@@ -8,52 +8,61 @@ from __future__ import annotations
 import numpy as np
 
 
-def _solver(V: np.ndarray, F: np.ndarray, t_coef: float = 1.0):
-    import potpourri3d as pp3d
+class GeodesicSolver:
+    """Heat-method geodesic distances on one mesh (potpourri3d's ``MeshHeatMethodDistanceSolver``): the mesh is
+    factorized once, then each source costs two back-substitutions and one Poisson solve.
 
-    return pp3d.MeshHeatMethodDistanceSolver(
-        np.ascontiguousarray(V, dtype=np.float64), np.ascontiguousarray(F, dtype=np.int64), t_coef=t_coef
-    )
-
-
-def geodesic_distances(V: np.ndarray, F: np.ndarray, sources, solver=None) -> np.ndarray:
-    """Geodesic distance from each source vertex to every vertex.
-
-    Args:
-        V: (n,3) float; F: (m,3) int; sources: (s,) int vertex ids.
-        solver: optional prebuilt ``potpourri3d.MeshHeatMethodDistanceSolver`` for (V, F) (reused if given).
-    Returns:
-        (s, n) float, same length units as V.
+    V: (n,3) float; F: (m,3) int; t_coef: heat time as a multiple of the mean edge length squared.
     """
-    sources = np.atleast_1d(np.asarray(sources, dtype=np.int64))
-    n = len(V)
-    if len(sources) and (sources.min() < 0 or sources.max() >= n):
-        raise ValueError(f"source ids must be in 0..{n - 1}")
-    solver = _solver(V, F) if solver is None else solver
-    out = np.empty((len(sources), n))
-    for row, s in enumerate(sources):  # one solve per source (the solver is factorized once)
-        out[row] = solver.compute_distance(int(s))
-    return out
+
+    def __init__(self, V: np.ndarray, F: np.ndarray, t_coef: float = 1.0):
+        import potpourri3d as pp3d
+
+        self.n_vertices = len(V)
+        self._heat = pp3d.MeshHeatMethodDistanceSolver(
+            np.ascontiguousarray(V, dtype=np.float64), np.ascontiguousarray(F, dtype=np.int64), t_coef=t_coef)
+
+    def distance(self, source: int) -> np.ndarray:
+        """(n,) float distance from vertex ``source`` to every vertex, length units of V."""
+        return self._heat.compute_distance(int(source))
+
+    def distances(self, sources) -> np.ndarray:
+        """(s, n) float distances from each of the (s,) int source vertices to every vertex."""
+        sources = np.atleast_1d(np.asarray(sources, dtype=np.int64))
+        n = self.n_vertices
+        if len(sources) and (sources.min() < 0 or sources.max() >= n):
+            raise ValueError(f"source ids must be in 0..{n - 1}")
+        out = np.empty((len(sources), n))
+        for row, s in enumerate(sources):
+            out[row] = self.distance(int(s))
+        return out
+
+    def diameter(self, rounds: int = 3, start: int = 0) -> float:
+        """Approximate geodesic diameter by repeated double sweeps (farthest point from a vertex, then from it).
+
+        Each sweep can only raise the estimate; it is a lower bound of the true diameter that is usually tight
+        on elongated shapes (humans: toe to fingertip / head). rounds: number of sweeps; start: first vertex.
+        """
+        v, best = int(start), 0.0
+        for _ in range(max(1, rounds)):
+            d = self.distance(v)
+            far = int(np.argmax(d))
+            if d[far] <= best:
+                break
+            best, v = float(d[far]), far
+        return best
 
 
-def geodesic_diameter(V: np.ndarray, F: np.ndarray, rounds: int = 3, start: int = 0, solver=None) -> float:
-    """Approximate geodesic diameter by repeated double sweeps (farthest point from a vertex, then from it).
+def geodesic_distances(V: np.ndarray, F: np.ndarray, sources, solver: GeodesicSolver | None = None) -> np.ndarray:
+    """(s, n) float geodesic distance from each source vertex (sources: (s,) int) to every vertex of V: (n,3),
+    F: (m,3). solver: a ``GeodesicSolver`` of (V, F) to reuse its factorization."""
+    return (GeodesicSolver(V, F) if solver is None else solver).distances(sources)
 
-    Each sweep can only raise the estimate; it is a lower bound of the true diameter that is usually tight
-    on elongated shapes (humans: toe to fingertip / head).
 
-    Args: V: (n,3); F: (m,3); rounds: number of sweeps; start: first vertex.
-    Returns: float, length units of V.
-    """
-    solver = _solver(V, F) if solver is None else solver
-    v, best = int(start), 0.0
-    for _ in range(max(1, rounds)):
-        d = solver.compute_distance(v)
-        far = int(np.argmax(d))
-        if d[far] <= best:
-            break
-        best, v = float(d[far]), far
-    return best
+def geodesic_diameter(V: np.ndarray, F: np.ndarray, rounds: int = 3, start: int = 0,
+                      solver: GeodesicSolver | None = None) -> float:
+    """Approximate geodesic diameter of (V, F), length units of V (see ``GeodesicSolver.diameter``)."""
+    return (GeodesicSolver(V, F) if solver is None else solver).diameter(rounds, start)
 
 
 def landmark_geodesics(V: np.ndarray, F: np.ndarray, vids, normalize: bool = True) -> np.ndarray:
@@ -65,11 +74,11 @@ def landmark_geodesics(V: np.ndarray, F: np.ndarray, vids, normalize: bool = Tru
     Returns:
         (k,k) float, symmetric (the heat method's small asymmetry is averaged out), zero diagonal.
     """
-    solver = _solver(V, F)
+    solver = GeodesicSolver(V, F)
     vids = np.asarray(vids, dtype=np.int64)
-    D = geodesic_distances(V, F, vids, solver=solver)[:, vids]
+    D = solver.distances(vids)[:, vids]
     D = 0.5 * (D + D.T)
     np.fill_diagonal(D, 0.0)
     if normalize:
-        D = D / geodesic_diameter(V, F, solver=solver)
+        D = D / solver.diameter()
     return D

@@ -1,37 +1,57 @@
 """Triangle-mesh reading and writing that never reorders or merges vertices.
 
 Vertex ``i`` of the file is row ``i`` of ``V``: ground truth such as "vertex i matches vertex i" survives.
-Polygons are fan-triangulated. Supported: OBJ, OFF, PLY (ASCII and binary little/big endian).
+Polygons are fan-triangulated ``(p0, pk, pk+1)``.
+
+Formats and readers:
+- PLY (ASCII, binary little/big endian): meshio (trimesh 5.2 fails on binary PLY files that mix triangles and
+  polygons). Faces come grouped by polygon size (triangles, quads, larger polygons), in file order within each.
+- STL, GLB/GLTF: trimesh (``process=False``, so nothing is merged or reordered; a GLB/GLTF scene is flattened
+  into one mesh with its node transforms applied, geometries in scene order). STL stores every triangle's
+  corners separately; they are merged (first occurrence order), since STL has no vertex ids to keep.
+- OBJ and OFF: a small reader here, because trimesh's OBJ loader splits vertices that carry several texture
+  coordinates / normals (``f 1/1 ...`` vs ``f 1/2 ...``) and does not resolve negative indices, and its OFF
+  loader fails on files mixing triangles and polygons: both would change vertex ids. OBJ: ``v`` and ``f`` lines
+  (``f a``, ``f a/b``, ``f a//c``, ``f a/b/c``, negative = relative to the vertices read so far); ``vt``,
+  ``vn``, materials, groups and objects are ignored (alignment and correspondence need geometry only).
 """
 from __future__ import annotations
 
 import os
-import struct
+import warnings
 
 import numpy as np
 
+from corr_core.geometry.primitives import surface_centroid  # noqa: F401 (re-exported)
+
+MESH_EXTENSIONS = (".obj", ".off", ".ply", ".stl", ".glb", ".gltf")
+
 
 class MeshError(ValueError):
-    """A mesh file that cannot be used; the message names the file and the problem."""
+    """A mesh file that cannot be used; the message names the file, the problem and the fix."""
 
 
 def load_mesh(path: str | os.PathLike, require_faces: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """Read a triangle mesh.
+    """Read a triangle mesh, vertices in file order.
 
     Args:
-        path: an ``.obj``, ``.off`` or ``.ply`` file.
-        require_faces: raise ``MeshError`` when the file has no faces.
+        path: an ``.obj``, ``.off``, ``.ply``, ``.stl``, ``.glb`` or ``.gltf`` file.
+        require_faces: raise ``MeshError`` when the file has no faces (False: a point cloud is fine).
     Returns:
         V: (n, 3) float64 vertex positions, in file order.
-        F: (m, 3) int64 triangle vertex indices (0-based).
+        F: (m, 3) int64 triangle vertex indices (0-based), polygons fan-triangulated, in file order (a PLY
+            file mixing triangles and polygons: grouped by polygon size).
     Raises:
-        MeshError: missing file, unknown format, parse error, NaN/inf coordinates, out-of-range indices,
+        MeshError naming the file: missing file, unknown format, parse error, no vertices, out-of-range
+        indices, NaN/inf coordinates of a vertex that a face uses (of any vertex when there are no faces),
         or (with ``require_faces``) no faces.
     """
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise MeshError(f"{path}: mesh file not found")
     ext = os.path.splitext(path)[1].lower()
+    if ext not in MESH_EXTENSIONS:
+        raise MeshError(f"{path}: unknown mesh format '{ext}' (use {', '.join(MESH_EXTENSIONS)})")
     try:
         if ext == ".obj":
             V, F = _read_obj(path)
@@ -40,127 +60,136 @@ def load_mesh(path: str | os.PathLike, require_faces: bool = True) -> tuple[np.n
         elif ext == ".ply":
             V, F = _read_ply(path)
         else:
-            raise MeshError(f"{path}: unknown mesh format '{ext}' (use .obj, .off or .ply)")
+            V, F = _read_with_trimesh(path)
     except MeshError:
         raise
-    except (ValueError, IndexError, struct.error, UnicodeDecodeError) as exc:
-        raise MeshError(f"{path}: cannot parse mesh ({exc})") from exc
+    except Exception as exc:  # parsers raise ValueError, IndexError, UnicodeDecodeError, struct/zlib errors...
+        raise MeshError(f"{path}: cannot parse mesh ({type(exc).__name__}: {exc}); "
+                        "check that the file is a complete, valid mesh") from exc
     check_mesh(V, F, name=path, require_faces=require_faces)
     return V, F
 
 
 def check_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", require_faces: bool = True) -> None:
-    """Raise ``MeshError`` naming ``name`` if ``V`` (n,3) / ``F`` (m,3) are not a usable triangle mesh."""
+    """Raise ``MeshError`` naming ``name`` if ``V`` (n,3) / ``F`` (m,3) are not a usable triangle mesh.
+
+    Only vertices that a face uses must be finite (unused ones are ignored everywhere); without faces, all.
+    """
     if V.ndim != 2 or V.shape[1] != 3 or len(V) == 0:
-        raise MeshError(f"{name}: mesh has no vertices")
-    if not np.all(np.isfinite(V)):
-        bad = int(np.flatnonzero(~np.isfinite(V).all(axis=1))[0])
-        raise MeshError(f"{name}: vertex {bad} has a NaN or infinite coordinate; repair or remove the mesh")
+        raise MeshError(f"{name}: mesh has no vertices (empty or not a mesh file)")
     if require_faces and len(F) == 0:
         raise MeshError(f"{name}: mesh has no faces (a point cloud?); a triangle mesh is required")
     if len(F) and (F.min() < 0 or F.max() >= len(V)):
-        raise MeshError(f"{name}: a face refers to a vertex outside 0..{len(V) - 1}")
+        raise MeshError(f"{name}: a face refers to a vertex outside 0..{len(V) - 1}; the file is corrupt")
+    used = np.unique(F) if len(F) else np.arange(len(V))
+    bad = used[~np.isfinite(V[used]).all(axis=1)]
+    if len(bad):
+        raise MeshError(f"{name}: {len(bad)} vertex/vertices used by a face have a NaN or infinite coordinate "
+                        f"(first: vertex {int(bad[0])}); repair the file or remove the mesh")
 
 
 def _fan(poly: list[int]) -> list[tuple[int, int, int]]:
     return [(poly[0], poly[k], poly[k + 1]) for k in range(1, len(poly) - 1)]
 
 
+def _as_arrays(verts, faces) -> tuple[np.ndarray, np.ndarray]:
+    return (np.asarray(verts, dtype=np.float64).reshape(-1, 3), np.asarray(faces, dtype=np.int64).reshape(-1, 3))
+
+
+def _obj_index(token: str, n_read: int, path: str, line_no: int) -> int:
+    """0-based vertex index of one ``f`` token (``a``, ``a/b``, ``a//c``, ``a/b/c``; negative = relative)."""
+    i = int(token.split("/", 1)[0])
+    if i == 0:
+        raise MeshError(f"{path}:{line_no}: OBJ face index 0 (OBJ indices start at 1)")
+    return i - 1 if i > 0 else n_read + i
+
+
 def _read_obj(path: str) -> tuple[np.ndarray, np.ndarray]:
     verts: list[list[float]] = []
     faces: list[tuple[int, int, int]] = []
     with open(path, "r", encoding="utf-8", errors="replace") as fh:
-        for line in fh:
-            if line.startswith("v "):
-                parts = line.split()
-                verts.append([float(parts[1]), float(parts[2]), float(parts[3])])
-            elif line.startswith("f "):
-                idx = []
-                for tok in line.split()[1:]:
-                    i = int(tok.split("/")[0])
-                    idx.append(i - 1 if i > 0 else len(verts) + i)
-                faces.extend(_fan(idx))
-    return np.asarray(verts, dtype=np.float64).reshape(-1, 3), np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+        for line_no, line in enumerate(fh, start=1):
+            parts = line.split()
+            if not parts:
+                continue
+            try:
+                if parts[0] == "v":
+                    verts.append([float(parts[1]), float(parts[2]), float(parts[3])])
+                elif parts[0] == "f":
+                    faces.extend(_fan([_obj_index(t, len(verts), path, line_no) for t in parts[1:]]))
+            except MeshError:
+                raise
+            except (ValueError, IndexError) as exc:
+                raise MeshError(f"{path}:{line_no}: cannot parse {line.strip()!r} ({exc})") from exc
+    return _as_arrays(verts, faces)
 
 
 def _tokens(path: str):
     with open(path, "r", encoding="utf-8", errors="replace") as fh:
         for line in fh:
-            line = line.split("#", 1)[0]
-            yield from line.split()
+            yield from line.split("#", 1)[0].split()
 
 
 def _read_off(path: str) -> tuple[np.ndarray, np.ndarray]:
     tok = _tokens(path)
-    head = next(tok)
+    head = next(tok, "")
     if not head.endswith("OFF"):
         raise MeshError(f"{path}: not an OFF file (first token '{head}')")
-    nv, nf, _ = int(next(tok)), int(next(tok)), int(next(tok))
-    V = np.array([[float(next(tok)) for _ in range(3)] for _ in range(nv)], dtype=np.float64).reshape(-1, 3)
-    faces: list[tuple[int, int, int]] = []
-    for _ in range(nf):
-        k = int(next(tok))
-        faces.extend(_fan([int(next(tok)) for _ in range(k)]))
-    return V, np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    try:
+        nv, nf, _ = int(next(tok)), int(next(tok)), int(next(tok))
+        V = [[float(next(tok)) for _ in range(3)] for _ in range(nv)]
+        faces: list[tuple[int, int, int]] = []
+        for _ in range(nf):
+            k = int(next(tok))
+            faces.extend(_fan([int(next(tok)) for _ in range(k)]))
+    except StopIteration:
+        raise MeshError(f"{path}: OFF file ends early (truncated?)") from None
+    return _as_arrays(V, faces)
 
 
-_PLY_TYPES = {"char": "b", "int8": "b", "uchar": "B", "uint8": "B", "short": "h", "int16": "h",
-              "ushort": "H", "uint16": "H", "int": "i", "int32": "i", "uint": "I", "uint32": "I",
-              "float": "f", "float32": "f", "double": "d", "float64": "d"}
+_SURFACE_CELLS = ("triangle", "quad", "polygon")
 
 
 def _read_ply(path: str) -> tuple[np.ndarray, np.ndarray]:
-    with open(path, "rb") as fh:
-        if fh.readline().strip() != b"ply":
-            raise MeshError(f"{path}: not a PLY file")
-        fmt, elements = None, []
-        while True:
-            line = fh.readline()
-            if not line:
-                raise MeshError(f"{path}: PLY header has no end_header")
-            parts = line.decode("ascii", "replace").split()
-            if not parts:
-                continue
-            if parts[0] == "format":
-                fmt = parts[1]
-            elif parts[0] == "element":
-                elements.append((parts[1], int(parts[2]), []))
-            elif parts[0] == "property":
-                elements[-1][2].append(parts[1:])
-            elif parts[0] == "end_header":
-                break
-        body = fh.read()
-    V = np.zeros((0, 3))
-    faces: list[tuple[int, int, int]] = []
-    if fmt == "ascii":
-        tok = iter(body.decode("ascii", "replace").split())
-        read = lambda t: float(next(tok)) if t in "fd" else int(next(tok))  # noqa: E731
-    else:
-        order = "<" if fmt == "binary_little_endian" else ">"
-        offset = [0]
+    """PLY through meshio: points in file order, surface cells fan-triangulated block by block."""
+    import meshio
 
-        def read(t: str):
-            val = struct.unpack_from(order + t, body, offset[0])[0]
-            offset[0] += struct.calcsize(t)
-            return val
-    for name, count, props in elements:
-        rows = []
-        for _ in range(count):
-            row = {}
-            for prop in props:
-                if prop[0] == "list":
-                    n = read(_PLY_TYPES[prop[1]])
-                    row[prop[3]] = [read(_PLY_TYPES[prop[2]]) for _ in range(int(n))]
-                else:
-                    row[prop[1]] = read(_PLY_TYPES[prop[0]])
-            rows.append(row)
-        if name == "vertex":
-            V = np.array([[r["x"], r["y"], r["z"]] for r in rows], dtype=np.float64).reshape(-1, 3)
-        elif name == "face":
-            for r in rows:
-                poly = r.get("vertex_indices", r.get("vertex_index"))
-                faces.extend(_fan([int(i) for i in poly]))
-    return V, np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mesh = meshio.read(path, file_format="ply")
+    polygons = [np.asarray(block.data, dtype=np.int64) for block in mesh.cells
+                if block.type.startswith(_SURFACE_CELLS)]
+    return np.asarray(mesh.points, dtype=np.float64)[:, :3], _fan_blocks(polygons)
+
+
+def _fan_blocks(polygons: list[np.ndarray]) -> np.ndarray:
+    """(m,3) fan triangles of blocks of polygons (each (k, n) int), block after block, polygon by polygon."""
+    out = [np.stack([P[:, [0, k, k + 1]] for k in range(1, P.shape[1] - 1)], axis=1).reshape(-1, 3)
+           for P in polygons if P.ndim == 2 and P.shape[1] >= 3]
+    return np.concatenate(out) if out else np.zeros((0, 3), dtype=np.int64)
+
+
+def _read_with_trimesh(path: str) -> tuple[np.ndarray, np.ndarray]:
+    """STL / GLB / GLTF through trimesh, without any processing (vertex order kept)."""
+    import trimesh
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # trimesh warns about textures/materials it cannot resolve
+        loaded = trimesh.load(path, process=False, maintain_order=True, force="mesh")
+    V = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64).reshape(-1, 3)
+    F = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
+    if path.lower().endswith(".stl") and len(F):
+        V, F = _merge_stl_corners(V, F)
+    return V, F
+
+
+def _merge_stl_corners(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Merge exactly equal corner positions of an STL triangle soup, vertices in first-occurrence order."""
+    _, first, inverse = np.unique(V, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[order] = np.arange(len(first))
+    return V[first[order]], rank[inverse.ravel()][F]
 
 
 def save_obj(path: str | os.PathLike, V: np.ndarray, F: np.ndarray) -> None:
@@ -170,41 +199,44 @@ def save_obj(path: str | os.PathLike, V: np.ndarray, F: np.ndarray) -> None:
         fh.write("".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in F))
 
 
-def surface_centroid(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """(3,) area-weighted centroid of the triangles: independent of tessellation and of rotations."""
-    T = V[F]
-    area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
-    if area.sum() <= 0:
-        return V.mean(axis=0)
-    return (area[:, None] * T.mean(axis=1)).sum(axis=0) / area.sum()
+def referenced_vertices(n_vertices: int, F: np.ndarray | None) -> np.ndarray:
+    """(k,) int ids of the vertices some face uses, increasing; all ``n_vertices`` when F is None or empty."""
+    if F is None or len(F) == 0:
+        return np.arange(n_vertices)
+    return np.unique(np.asarray(F))
 
 
 def normalize_mesh(V: np.ndarray, center: str = "bbox", F: np.ndarray | None = None
                    ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Centre a shape at the origin and scale it to unit radius.
+    """Centre a shape at the origin and scale it to unit radius, from the vertices the faces use.
+
+    Vertices no face uses (stray points in a scan, possibly far away or NaN) take no part in the centre or
+    the scale: they are transformed like the others but can lie outside the unit ball.
 
     Args:
         V: (n, 3) vertex positions.
         center: "bbox" (centre of the axis-aligned bounding box), "mean" (vertex centroid) or "area"
             (area-weighted surface centroid, needs ``F``; commutes with rotations and does not depend on the
             tessellation, so a rotated copy of a shape normalizes to the rotated normalized shape).
-        F: (m, 3) faces, for center="area".
+        F: (m, 3) faces; None = every vertex counts (a point cloud).
     Returns:
-        Vn: (n, 3) normalized positions, max ||Vn_i|| == 1.
+        Vn: (n, 3) normalized positions, max ||Vn_i|| == 1 over referenced vertices.
         c: (3,) the centre that was subtracted.
         s: the scale that was divided by (the radius about ``c``).
     """
+    used = V[referenced_vertices(len(V), F)]
     if center == "bbox":
-        c = 0.5 * (V.min(axis=0) + V.max(axis=0))
+        c = 0.5 * (used.min(axis=0) + used.max(axis=0))
     elif center == "mean":
-        c = V.mean(axis=0)
+        c = used.mean(axis=0)
     elif center == "area":
         if F is None:
             raise ValueError("center='area' needs the faces F")
         c = surface_centroid(V, F)
     else:
         raise ValueError(f"center must be 'bbox', 'mean' or 'area', got {center!r}")
-    r = float(np.linalg.norm(V - c, axis=1).max())
+    r = float(np.linalg.norm(used - c, axis=1).max())
     if not np.isfinite(r) or r <= 0:
-        raise MeshError("cannot normalize a mesh whose vertices all coincide")
-    return (V - c) / r, c, r
+        raise MeshError("cannot normalize a mesh whose vertices all coincide (or are not finite)")
+    with np.errstate(invalid="ignore", over="ignore"):
+        return (V - c) / r, c, r

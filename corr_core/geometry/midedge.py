@@ -39,27 +39,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-
-def mesh_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Number the edges of a triangle mesh by first appearance.
-
-    Args:
-        F: (m, 3) int faces.
-    Returns:
-        edges: (n_edges, 2) int, vertex pair of each edge in the order first seen (half-edge (a,b) of a face).
-        face_edges: (m, 3) int, edge ids of each face's (a,b), (b,c), (c,a).
-    """
-    F = np.asarray(F, dtype=np.int64)
-    half = np.stack([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]], axis=1).reshape(-1, 2)  # face-major
-    lo, hi = half.min(1), half.max(1)
-    key = lo * (int(F.max()) + 1) + hi
-    _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
-    order = np.argsort(first, kind="stable")           # unique keys in order of first appearance
-    rank = np.empty(len(first), dtype=np.int64)
-    rank[order] = np.arange(len(first))
-    edges = half[first[order]]
-    face_edges = rank[inverse.ravel()].reshape(-1, 3)
-    return edges, face_edges
+from corr_core.geometry.laplacian import cotan_laplacian
+from corr_core.geometry.primitives import face_areas, mesh_edges, surface_centroid
 
 
 def edge_midpoints(V: np.ndarray, edges: np.ndarray) -> np.ndarray:
@@ -92,30 +73,11 @@ def vertex_to_edge(vid, edges: np.ndarray, F: np.ndarray | None = None):
     return int(out) if np.ndim(out) == 0 else out
 
 
-def cotan_laplacian(V: np.ndarray, F: np.ndarray) -> sp.csr_matrix:
-    """Positive semi-definite cotan Laplacian ``L`` (n,n): ``(L u)_i = sum_j w_ij (u_i - u_j)``,
-    ``w_ij = (cot alpha + cot beta) / 2``. V: (n,3) float, F: (m,3) int."""
-    V = np.asarray(V, dtype=float)
-    n = len(V)
-    rows, cols, vals = [], [], []
-    for k in range(3):                      # angle at corner k weights the opposite edge (i, j)
-        i, j, o = F[:, (k + 1) % 3], F[:, (k + 2) % 3], F[:, k]
-        a, b = V[i] - V[o], V[j] - V[o]
-        cot = np.einsum("ij,ij->i", a, b) / np.maximum(np.linalg.norm(np.cross(a, b), axis=1), 1e-300)
-        w = 0.5 * cot
-        rows += [i, j, i, j]
-        cols += [j, i, i, j]
-        vals += [-w, -w, w, w]
-    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
-
-
 def default_seed_face(V: np.ndarray, F: np.ndarray) -> int:
     """Index of the face whose centroid is nearest the area-weighted surface centroid (index-free choice)."""
     V = np.asarray(V, dtype=float)
-    C = V[F].mean(axis=1)
-    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
-    center = (C * area[:, None]).sum(0) / area.sum()
-    return int(np.argmin(np.linalg.norm(C - center, axis=1)))
+    center = surface_centroid(V, F)
+    return int(np.argmin(np.linalg.norm(V[F].mean(axis=1) - center, axis=1)))
 
 
 def face_neighbors(face_edges: np.ndarray, f: int) -> np.ndarray:
@@ -227,7 +189,7 @@ def midedge_conformal_factor(V: np.ndarray, edges: np.ndarray, face_edges: np.nd
     """
     V = np.asarray(V, dtype=float)
     Fk = np.asarray(F)[kept_faces]
-    area3 = 0.125 * np.linalg.norm(np.cross(V[Fk[:, 1]] - V[Fk[:, 0]], V[Fk[:, 2]] - V[Fk[:, 0]]), axis=1)
+    area3 = 0.25 * face_areas(V, Fk)  # a mid-edge triangle has a quarter of its face's area
     P = Z[face_edges]
     area2 = 0.5 * np.abs(np.imag(np.conj(P[:, 1] - P[:, 0]) * (P[:, 2] - P[:, 0])))
     logf = 0.5 * np.log(np.maximum(area2, 1e-300) / np.maximum(area3, 1e-300))

@@ -1,0 +1,152 @@
+"""Dense correspondence on the course SCAPE data: the project's dense maps against pyFM, in one run.
+
+Template meshes/template/mesh000.obj -> each of meshes/test/*.obj (ground truth: vertex i <-> vertex i).
+Inputs used by every method: the two meshes; ``dense_sparse`` and pyFM "5 points" also the 5 sparse landmark ids
+(sparse_landmark_vids.txt, on both meshes); ``dense_auto`` and pyFM "none" no point on the target.
+The 20 landmarks (landmark_vids.txt) are used only to *evaluate* the transfer; uniform_sample_vids.txt is never read.
+
+Methods:
+  pyfm_none    pyFM 1.3 (pip ``pyfmaps``): WKS (100 energies, every 5th as descriptor) functional map 35x35 with the
+               orientation term, ZoomOut to 115 (NOTES.md recipe)
+  pyfm_5pts    the same with the 5 sparse landmarks as landmark descriptors
+  dense_sparse corr_core.correspondence.dense with the 5 sparse landmarks given on both meshes
+  dense_auto   corr_core.correspondence.dense, automatic (nothing given on the target)
+
+Measures (target surface, heat-method geodesics, / sqrt(target area)): dense mean error over ``--eval-vertices``
+farthest-point template vertices, fraction within 0.05 / 0.10 / 0.25, landmark accuracy (a transferred landmark is
+right when its nearest true landmark has its name), landmark transfer error, seconds per pair. Timing per pair
+includes the target's own per-mesh work (eigenpairs etc.); the template's is done once for every method
+(pyFM: its template TriMesh is processed once and reused) and reported separately.
+
+Run:  python bench/dense.py [--pairs N] [--methods pyfm_none,pyfm_5pts,dense_sparse,dense_auto] [--json OUT]
+"""
+from __future__ import annotations
+
+import argparse
+import glob
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DEFAULT_DATA = os.path.join(os.path.dirname(ROOT), "shared", "data", "hw3", "scape")
+METHODS = ("pyfm_none", "pyfm_5pts", "dense_sparse", "dense_auto")
+
+
+def _pyfm_template(path: str, k: int = 120):
+    from pyFM.mesh import TriMesh
+
+    return TriMesh(path, area_normalize=True, center=True).process(k=k, intrinsic=False, verbose=False)
+
+
+def run_pyfm(template_mesh, target_path: str, landmarks=None) -> np.ndarray:
+    """pyFM recipe of docs/NOTES.md; returns (n_template,) target vertex ids."""
+    from pyFM.functional import FunctionalMapping
+    from pyFM.mesh import TriMesh
+
+    target = TriMesh(target_path, area_normalize=True, center=True)
+    model = FunctionalMapping(target, template_mesh)
+    lm = None if landmarks is None else np.asarray(landmarks)
+    model.preprocess(n_descr=100, descr_type="WKS", landmarks=lm, subsample_step=5, k_process=120,
+                     verbose=False)
+    model.fit(K=(35, 35), w_descr=1, w_lap=0.1, w_dcomm=1, w_orient=1, verbose=False)
+    model.zoomout_refine(nit=16, step=5, verbose=False)
+    return np.asarray(model.get_p2p(), dtype=np.int64)        # p2p_21: template vertex -> target vertex
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", default=DEFAULT_DATA, help="course scape/ folder")
+    ap.add_argument("--pairs", type=int, default=None, help="only the first N test meshes")
+    ap.add_argument("--methods", default=",".join(METHODS))
+    ap.add_argument("--eval-vertices", type=int, default=2000, help="farthest-point template vertices evaluated")
+    ap.add_argument("--json", default=None, help="write per-pair and summary results here")
+    args = ap.parse_args(argv)
+
+    from corr_core.correspondence.dense import basis as dense_basis
+    from corr_core.correspondence.dense import dense_map, measures
+    from corr_core.correspondence.dense.transfer import transfer_landmarks
+    from corr_core.correspondence.landmarks import read_landmarks
+    from corr_core.geometry.geodesic import GeodesicSolver
+    from corr_core.geometry.mesh_io import load_mesh
+
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    unknown = sorted(set(methods) - set(METHODS))
+    if unknown:
+        ap.error(f"unknown methods {unknown}; choose from {', '.join(METHODS)}")
+    tpl_path = os.path.join(args.data, "meshes", "template", "mesh000.obj")
+    tests = sorted(glob.glob(os.path.join(args.data, "meshes", "test", "*.obj")))[:args.pairs]
+    if not os.path.isfile(tpl_path) or not tests:
+        print(f"no SCAPE data under {args.data} (expected meshes/template/mesh000.obj and meshes/test/*.obj)",
+              file=sys.stderr)
+        return 2
+    Vs, Fs = load_mesh(tpl_path)
+    lm_ids, lm_names = read_landmarks(os.path.join(args.data, "landmark_vids.txt"), n_vertices=len(Vs))
+    sparse_ids, _ = read_landmarks(os.path.join(args.data, "sparse_landmark_vids.txt"), n_vertices=len(Vs))
+
+    t0 = time.perf_counter()
+    S = dense_basis.mesh_basis(Vs, Fs, k=100, name=tpl_path)
+    S.distances(S.samples[:1])                                 # build the template's geodesic solver once
+    template_seconds = {"dense": time.perf_counter() - t0}
+    pyfm_template = None
+    if any(m.startswith("pyfm") for m in methods):
+        t0 = time.perf_counter()
+        pyfm_template = _pyfm_template(tpl_path)
+        template_seconds["pyfm"] = time.perf_counter() - t0
+    eval_vertices = S.samples[:args.eval_vertices]
+
+    rows = []
+    for path in tests:
+        name = os.path.splitext(os.path.basename(path))[0]
+        Vt, Ft = load_mesh(path)
+        maps, seconds = {}, {}
+        for m in methods:
+            t0 = time.perf_counter()
+            if m == "pyfm_none":
+                maps[m] = run_pyfm(pyfm_template, path)
+            elif m == "pyfm_5pts":
+                maps[m] = run_pyfm(pyfm_template, path, landmarks=sparse_ids)
+            else:
+                T = dense_basis.mesh_basis(Vt, Ft, k=100, name=path)
+                if m == "dense_sparse":
+                    maps[m] = dense_map(Vs, Fs, Vt, Ft, sparse_ids, sparse_ids, basis_template=S, basis_target=T)
+                else:
+                    maps[m] = dense_map(Vs, Fs, Vt, Ft, basis_template=S, basis_target=T)
+            seconds[m] = time.perf_counter() - t0
+        solver = GeodesicSolver(Vt, Ft)
+        errs = measures.dense_errors(Vt, Ft, maps, np.arange(len(Vs)), vertices=eval_vertices, solver=solver)
+        row = {"mesh": name}
+        for m in methods:
+            placed = transfer_landmarks(maps[m], lm_ids)
+            lm_err, nearest = measures.landmark_errors(Vt, Ft, placed, lm_ids, solver=solver)
+            row[m] = {**measures.summary(errs[m]), "landmark_accuracy": measures.landmark_accuracy(nearest),
+                      "landmark_error": float(lm_err.mean()), "seconds": seconds[m],
+                      "kim_curve": measures.kim_curve(errs[m]).tolist()}
+        rows.append(row)
+        print(name + "  " + "  ".join(f"{m}: {row[m]['mean_error']:.4f} acc {row[m]['landmark_accuracy']:.2f} "
+                                      f"{row[m]['seconds']:.1f}s" for m in methods), flush=True)
+
+    summary = {}
+    for m in methods:
+        keys = ("landmark_accuracy", "mean_error", "within_0.05", "within_0.10", "within_0.25", "landmark_error",
+                "seconds")
+        summary[m] = {k: float(np.mean([r[m][k] for r in rows])) for k in keys}
+    print(f"\n{len(rows)} pairs, template {os.path.relpath(tpl_path, args.data)}; errors: geodesic / sqrt(area) "
+          f"at {len(eval_vertices)} farthest-point template vertices; template set-up (once): "
+          + ", ".join(f"{k} {v:.1f}s" for k, v in template_seconds.items()))
+    print(f"{'method':<14}{'lm acc':>8}{'mean err':>10}{'<=0.05':>8}{'<=0.10':>8}{'<=0.25':>8}{'lm err':>8}"
+          f"{'s/pair':>8}")
+    for m, s in summary.items():
+        print(f"{m:<14}{s['landmark_accuracy']:>8.4f}{s['mean_error']:>10.4f}{s['within_0.05']:>8.3f}"
+              f"{s['within_0.10']:>8.3f}{s['within_0.25']:>8.3f}{s['landmark_error']:>8.4f}{s['seconds']:>8.1f}")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump({"summary": summary, "pairs": rows, "template_seconds": template_seconds}, fh, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,153 @@
+"""Functional maps (Ovsjanikov et al. 2012) with the orientation-preserving term (Ren et al. 2018).
+
+Convention (used by every module of this package): the template is the *source* S (n_s vertices), the target is
+T (n_t vertices); a point map is ``p2p: (n_s,) int``, the target vertex of each template vertex. Its functional
+map is the pull-back ``C: (k_s, k_t)``: a target function with coefficients ``a`` (f = Phi_T a) pulls back to
+the template function with coefficients ``C a``. So ``Phi_S C ~ Phi_T[p2p]`` (rows: vertices), and the point map
+of a functional map is the nearest row of ``Phi_T`` to each row of ``Phi_S C``.
+
+Fit (``fit_functional_map``): least squares in C of
+    w_descr  ||C A_T - A_S||^2                        descriptors d_S ~ d_T o p2p (A = Phi^T M d)
+  + w_lap    sum_ij (lam_T_j - lam_S_i)^2 C_ij^2      commutativity with the Laplacians
+  + w_orient sum_f ||C Om_T(f) - Om_S(f) C||^2        orientation: Om(f) g = <n, grad f x grad g>
+each term divided by its typical size (as pyFM's canonical weights) so the weights are comparable. The orientation operator changes sign under
+a mirror image, so the term separates a map from its left/right flip; descriptors and the Laplacian cannot.
+The problem is quadratic: it is solved exactly by one dense linear system of size k_s * k_t.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from corr_core.correspondence.dense.basis import MeshBasis, face_gradients
+from corr_core.geometry.primitives import face_areas, face_normals
+
+
+def project(basis: MeshBasis, funcs: np.ndarray, k: int) -> np.ndarray:
+    """Spectral coefficients of vertex functions: (n, q) -> (k, q) = Phi[:, :k]^T M funcs."""
+    return basis.evecs[:, :k].T @ (basis.mass[:, None] * funcs)
+
+
+def orientation_operators(basis: MeshBasis, funcs: np.ndarray, k: int, normalize: bool = False) -> np.ndarray:
+    """Reduced orientation operators of descriptor functions (Ren et al. 2018, sec. 4).
+
+    Om(f)[i, j] = integral over the surface of phi_i <n, g_f x grad phi_j>, with g_f the per-face gradient of f
+    (normalized to unit length with ``normalize``).
+
+    Args: basis: the mesh; funcs: (n, q) descriptor functions; k: basis size.
+    Returns: (q, k, k) float.
+    """
+    V, F = basis.V, basis.F
+    Phi = basis.evecs[:, :k]
+    G_basis = face_gradients(basis, Phi)                      # (m,3,k)
+    G_f = face_gradients(basis, funcs)                        # (m,3,q)
+    if normalize:
+        G_f /= np.maximum(np.linalg.norm(G_f, axis=1, keepdims=True), 1e-12)
+    N = face_normals(V, F)
+    W = np.cross(N[:, :, None], G_f, axis=1)                  # (m,3,q): n x g_f
+    P = Phi[F].mean(axis=1) * face_areas(V, F)[:, None]       # (m,k): face-mean of phi_i times face area
+    Q = np.einsum("mcq,mck->qmk", W, G_basis)                 # (q,m,k): (n x g_f) . grad phi_j
+    return np.einsum("mi,qmj->qij", P, Q)
+
+
+def fit_functional_map(A_S: np.ndarray, A_T: np.ndarray, evals_S: np.ndarray, evals_T: np.ndarray,
+                       Om_S: np.ndarray | None = None, Om_T: np.ndarray | None = None, w_descr: float = 1.0,
+                       w_lap: float = 0.1, w_orient: float = 1.0) -> np.ndarray:
+    """Solve the quadratic functional-map energy of the module docstring exactly.
+
+    Args:
+        A_S: (k_s, q) template descriptor coefficients; A_T: (k_t, q) target ones (same descriptors, same order).
+        evals_S: (>= k_s,) and evals_T: (>= k_t,) eigenvalues (any units; the term is normalized).
+        Om_S: (q', k_s, k_s), Om_T: (q', k_t, k_t) orientation operators of corresponding descriptors, or None.
+        w_descr, w_lap, w_orient: weights of the three terms.
+    Returns:
+        C: (k_s, k_t) float.
+    """
+    ks, kt = A_S.shape[0], A_T.shape[0]
+    if A_S.shape[1] != A_T.shape[1]:
+        raise ValueError(f"descriptor counts differ: {A_S.shape[1]} vs {A_T.shape[1]}")
+    n, m, q = ks * kt, min(ks, kt), A_S.shape[1]
+    # Each term is divided by its typical size at a generic map of norm sqrt(m) (pyFM's "canonical" scales).
+    # unknown x = vec(C), column-major: x[i + ks * j] = C[i, j]
+    # descriptor term ||C A_T - A_S||^2: H += (A_T A_T^T) kron I, b += vec(A_S A_T^T)
+    d_scale = max(m * float(np.sum(A_S[1:] ** 2)) / ks / q, 1e-300)
+    H = w_descr / d_scale * np.kron(A_T @ A_T.T, np.eye(ks))
+    b = w_descr / d_scale * (A_S @ A_T.T).ravel(order="F")
+    lap = (evals_T[None, :kt] - evals_S[:ks, None]) ** 2
+    l_scale = max(m * float(lap.mean()), 1e-300)
+    H[np.diag_indices(n)] += w_lap / l_scale * lap.ravel(order="F")
+    if Om_S is not None and Om_T is not None and w_orient > 0 and len(Om_S):
+        # ||C P - Q C||^2 with P = Om_T (kt x kt), Q = Om_S (ks x ks); vec(C P) = (P^T kron I) x,
+        # vec(Q C) = (I kron Q) x; K = P^T kron I - I kron Q; K^T K summed over descriptors.
+        nq = len(Om_S)
+        o_scale = max(m / (ks * kt) * (kt * float(np.sum(Om_S**2)) + ks * float(np.sum(Om_T**2))) / nq, 1e-300)
+        PPt = np.einsum("qij,qkj->ik", Om_T, Om_T)             # sum P P^T (kt x kt)
+        QtQ = np.einsum("qji,qjk->ik", Om_S, Om_S)             # sum Q^T Q (ks x ks)
+        # (P^T kron I)^T (I kron Q) = P kron Q (its transpose is P^T kron Q^T), summed over descriptors
+        cross = (Om_T.reshape(nq, -1).T @ Om_S.reshape(nq, -1)).reshape(kt, kt, ks, ks)
+        cross = cross.transpose(0, 2, 1, 3).reshape(kt * ks, kt * ks)
+        KtK = np.kron(PPt, np.eye(ks)) + np.kron(np.eye(kt), QtQ) - cross - cross.T
+        H += w_orient / o_scale * KtK
+    C = np.linalg.solve(H + 1e-12 * np.eye(n), b)
+    return C.reshape((ks, kt), order="F")
+
+
+def fmap_from_p2p(p2p: np.ndarray, Phi_S_rows: np.ndarray, Phi_T: np.ndarray) -> np.ndarray:
+    """Least-squares pull-back functional map of a point map given on some template rows.
+
+    Args:
+        p2p: (r,) int target vertex of each given template row.
+        Phi_S_rows: (r, k_s) template basis at those rows; Phi_T: (n_t, k_t) target basis.
+    Returns: C: (k_s, k_t) with Phi_S_rows C ~ Phi_T[p2p].
+    """
+    return np.linalg.lstsq(Phi_S_rows, Phi_T[p2p], rcond=None)[0]
+
+
+def nearest_rows(queries: np.ndarray, points: np.ndarray, chunk: int = 4096) -> np.ndarray:
+    """Index of the nearest row of ``points`` (p, d) for each row of ``queries`` (q, d) -> (q,) int.
+
+    Brute force (exact, ties to the lowest index), chunked to bound memory; fast for d of tens to hundreds.
+    """
+    queries = np.ascontiguousarray(queries, dtype=np.float64)
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    sq = np.einsum("ij,ij->i", points, points)
+    out = np.empty(len(queries), dtype=np.int64)
+    for s in range(0, len(queries), chunk):
+        q = queries[s:s + chunk]
+        out[s:s + chunk] = np.argmin(sq[None, :] - 2.0 * q @ points.T, axis=1)
+    return out
+
+
+def p2p_from_fmap(C: np.ndarray, Phi_S_rows: np.ndarray, Phi_T_cands: np.ndarray) -> np.ndarray:
+    """Point map of a functional map: nearest candidate row of Phi_T to each row of Phi_S C.
+
+    Args: C: (k_s, k_t); Phi_S_rows: (r, k_s); Phi_T_cands: (c, k_t). Returns (r,) int index into the candidates.
+    """
+    return nearest_rows(Phi_S_rows @ C, Phi_T_cands)
+
+
+def chirality_functions(basis: MeshBasis, dist: np.ndarray) -> np.ndarray:
+    """Orientation-aware, pose-invariant vertex functions from distance fields.
+
+    For each pair (i, j) of distance fields, s_ij = <n, g_i x g_j> with g the unit face gradients: the signed
+    sine of the angle between the directions away from landmarks i and j. It is intrinsic (unchanged by bending)
+    and changes sign on the mirror image, so it tells the belly from the back and left from right, which the
+    distances alone cannot.
+
+    Args: basis: the mesh; dist: (n, L) distance fields (e.g. geodesic distance to L landmarks), L >= 2.
+    Returns: (n, L (L-1) / 2) float in [-1, 1], face values averaged to vertices (area weights).
+    """
+    from itertools import combinations
+
+    G = face_gradients(basis, dist)                                       # (m,3,L)
+    G /= np.maximum(np.linalg.norm(G, axis=1, keepdims=True), 1e-12)
+    N = face_normals(basis.V, basis.F)
+    pairs = list(combinations(range(dist.shape[1]), 2))
+    i, j = np.array(pairs).T
+    s = np.einsum("mc,mcp->mp", N, np.cross(G[:, :, i], G[:, :, j], axis=1))   # (m, P)
+    A = face_areas(basis.V, basis.F)
+    out = np.zeros((basis.n, len(pairs)))
+    w = np.zeros(basis.n)
+    for c in range(3):
+        np.add.at(out, basis.F[:, c], A[:, None] * s)
+        np.add.at(w, basis.F[:, c], A)
+    return out / np.maximum(w, 1e-300)[:, None]

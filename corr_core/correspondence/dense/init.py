@@ -1,0 +1,225 @@
+"""Initial dense maps: from a few points given on both meshes, or fully automatic.
+
+From points (``map_from_points``): the geodesic distance to each given point, its localized versions
+exp(-(d / s)^2) and the pairwise *chirality functions* (``fmaps.chirality_functions``: the signed sine between the
+directions to two points; it flips sign on a mirror image, so belly/back and left/right are told apart) are
+corresponding functions on both meshes. A functional map fitted to them (descriptors + Laplacian
+commutativity, ``fmaps.fit_functional_map``) is refined by ZoomOut.
+
+Automatic (``map_automatic``): feature points are detected on each mesh independently (``extremities``: local
+maxima of the average geodesic distance, i.e. hands, feet and head of a body), candidate assignments between the
+two sets are ranked by how well they preserve the geodesic distances between the points (which cannot tell
+left from right), and each of the best few is turned into a map by ``map_from_points``. Among the maps that keep
+the surface orientation (``orientation_agreement`` > 0: small triangles of samples keep their handedness; a
+mirror map reverses it), the one under which the heat kernel signatures agree best wins (``hks_disagreement``: it
+tells front from back, i.e. rejects the orientation-preserving 180-degree turn).
+"""
+from __future__ import annotations
+
+from itertools import permutations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from corr_core.correspondence.dense import fmaps, zoomout
+from corr_core.correspondence.dense.basis import MeshBasis
+from corr_core.geometry.primitives import vertex_adjacency
+
+LOCAL_SCALES = (0.1, 0.2, 0.4)       # widths of exp(-(d/s)^2), units sqrt(area)
+CHIRALITY_WEIGHT = 0.3
+
+
+def point_features(basis: MeshBasis, points: np.ndarray, chirality_weight: float = CHIRALITY_WEIGHT,
+                   scales=LOCAL_SCALES, distances: np.ndarray | None = None) -> np.ndarray:
+    """Vertex functions that follow from a few labelled points.
+
+    Args: basis: the mesh; points: (L,) int vertex ids (L >= 2; the order is the labelling);
+        distances: optional (L, n) ``basis.distances(points)`` (reused when given).
+    Returns: (n, L (1 + len(scales)) + L (L - 1) / 2) float: distances / sqrt(area), exp(-(d/s)^2) per scale,
+        chirality functions times ``chirality_weight``.
+    """
+    points = np.asarray(points, dtype=np.int64)
+    if points.ndim != 1 or len(points) < 2:
+        raise ValueError(f"need at least 2 points, got {points.shape}")
+    if points.min() < 0 or points.max() >= basis.n:
+        raise ValueError(f"point ids must be in 0..{basis.n - 1}, got {points.min()}..{points.max()}")
+    d = (basis.distances(points) if distances is None else np.asarray(distances)).T
+    local = [np.exp(-(d / s) ** 2) for s in scales]
+    return np.concatenate([d] + local + [chirality_weight * fmaps.chirality_functions(basis, d)], axis=1)
+
+
+def fmap_from_points(source: MeshBasis, target: MeshBasis, points_source: np.ndarray, points_target: np.ndarray,
+                     k: int = 40, w_lap: float = 0.1, w_orient: float = 0.0, features=None) -> np.ndarray:
+    """Functional map (k x k, template x target) fitted to the point features of corresponding points.
+
+    Args: points_source, points_target: (L,) int corresponding vertex ids; features: optional precomputed
+        (F_source, F_target) from ``point_features``. Returns C: (k, k).
+    """
+    if len(points_source) != len(points_target):
+        raise ValueError(f"{len(points_source)} template points but {len(points_target)} target points")
+    FS, FT = features if features is not None else (point_features(source, points_source),
+                                                    point_features(target, points_target))
+    k = int(min(k, source.evecs.shape[1], target.evecs.shape[1]))
+    A_S, A_T = fmaps.project(source, FS, k), fmaps.project(target, FT, k)
+    Om_S = Om_T = None
+    if w_orient > 0:
+        Om_S, Om_T = fmaps.orientation_operators(source, FS, k), fmaps.orientation_operators(target, FT, k)
+    return fmaps.fit_functional_map(A_S, A_T, source.evals, target.evals, Om_S, Om_T, w_lap=w_lap,
+                                    w_orient=w_orient)
+
+
+def map_from_points(source: MeshBasis, target: MeshBasis, points_source, points_target, k_init: int = 40,
+                    k_end: int = 100, step: int = 5, features=None) -> tuple[np.ndarray, np.ndarray]:
+    """Functional map from corresponding points, refined by ZoomOut on the samples.
+
+    Returns: C: (k_end, k_end) functional map, p2p_samples: (len(source.samples),) int target vertex of each
+    template sample.
+    """
+    C = fmap_from_points(source, target, points_source, points_target, k=k_init, features=features)
+    C = zoomout.zoomout(source, target, C, k_end=k_end, step=step)
+    ks, kt = C.shape
+    match = fmaps.p2p_from_fmap(C, source.evecs[source.samples, :ks], target.evecs[target.samples, :kt])
+    return C, target.samples[match]
+
+
+def average_geodesic_distance(basis: MeshBasis, n_sources: int = 32) -> np.ndarray:
+    """Average geodesic distance / sqrt(area) of every vertex to ``n_sources`` farthest-point samples: (n,)."""
+    return basis.distances(basis.samples[:n_sources]).mean(axis=0)
+
+
+def _ring_max(values: np.ndarray, F: np.ndarray, rings: int) -> np.ndarray:
+    """Largest value within ``rings`` edges of each vertex: values (n,), F (m,3) -> (n,)."""
+    A = vertex_adjacency(F, len(values)).tocsr()
+    out = np.asarray(values, dtype=np.float64).copy()
+    starts, idx = A.indptr, A.indices
+    for _ in range(rings):
+        nb = np.maximum.reduceat(out[idx], starts[:-1]) if len(idx) else out
+        has = np.diff(starts) > 0
+        out = np.where(has, np.maximum(out, nb), out)
+    return out
+
+
+def extremities(basis: MeshBasis, max_points: int = 6, radius: float = 0.25, n_sources: int = 64,
+                neighbourhood: float = 0.1, min_level: float = 0.3) -> np.ndarray:
+    """Feature points: local maxima of the average geodesic distance (AGD), far apart (Lipman & Funkhouser 2009
+    use such extremal points; on a body they are hands, feet and head).
+
+    A vertex qualifies when its AGD is the largest within ``neighbourhood`` (units sqrt(area), counted in edge
+    rings of the mean edge length), it is at
+    least ``radius`` (units sqrt(area), geodesic) from every point already taken, and its AGD is above
+    ``min(AGD) + min_level * (max(AGD) - min(AGD))``. Points are taken in decreasing AGD (ties: lowest id).
+
+    Returns: (p,) int vertex ids, p <= max_points, decreasing AGD.
+    """
+    agd = average_geodesic_distance(basis, n_sources)
+    E = basis.V[basis.F[:, [1, 2, 0]]] - basis.V[basis.F]
+    mean_edge = float(np.linalg.norm(E, axis=2).mean()) / basis.scale
+    rings = max(1, int(round(neighbourhood / mean_edge)))
+    is_max = agd >= _ring_max(agd, basis.F, rings)
+    level = agd.min() + min_level * (agd.max() - agd.min())
+    order = np.lexsort((np.arange(basis.n), -agd))
+    taken: list[int] = []
+    nearest = np.full(basis.n, np.inf)
+    for v in order:
+        if len(taken) >= max_points or agd[v] < level:
+            break
+        if not is_max[v] or nearest[v] < radius:
+            continue
+        taken.append(int(v))
+        nearest = np.minimum(nearest, basis.distances([v])[0])
+    return np.array(taken, dtype=np.int64)
+
+
+def ranked_assignments(D_source: np.ndarray, D_target: np.ndarray, keep: int = 6) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Injective assignments between two small point sets ranked by geodesic distortion.
+
+    Args: D_source: (p, p), D_target: (q, q) pairwise geodesic distances / sqrt(area); min(p, q) >= 3; p, q <= 7.
+    Returns: up to ``keep`` (source index (r,), target index (r,), mean |distance difference|), best first,
+        r = min(p, q) (all source points when p <= q).
+    """
+    p, q = len(D_source), len(D_target)
+    r = min(p, q)
+    if r < 3:
+        raise ValueError(f"need at least 3 feature points on each mesh, got {p} and {q}")
+    if max(p, q) > 7:
+        raise ValueError("at most 7 feature points per mesh (the assignment search is exhaustive)")
+    results = []
+    src_sets = [np.arange(p)] if p <= q else [np.array(c) for c in permutations(range(p), r)
+                                                 if list(c) == sorted(c)]
+    iu = np.triu_indices(r, 1)
+    for s in src_sets:
+        Ds = D_source[np.ix_(s, s)][iu]
+        for t in permutations(range(q), r):
+            t = np.array(t)
+            cost = float(np.mean(np.abs(Ds - D_target[np.ix_(t, t)][iu])))
+            results.append((s, t, cost))
+    results.sort(key=lambda x: (x[2], tuple(x[0]), tuple(x[1])))
+    return results[:keep]
+
+
+def orientation_agreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarray,
+                          neighbours: tuple[int, int] = (3, 6)) -> float:
+    """How much a map keeps the surface orientation, in [-1, 1] (+1: orientation-preserving, -1: a mirror map).
+
+    For every template sample s, the triangle (s, a, b) with a, b its ``neighbours``-th nearest samples (3D) has an
+    orientation sign det[a - s, b - s, n_s] (n: vertex normal); the map keeps it when the image triangle has the
+    same sign w.r.t. the target normal at the image of s. Returns the mean product of the two signs.
+    """
+    from corr_core.geometry.primitives import vertex_normals
+
+    X = source.V[source.samples]
+    _, nb = cKDTree(X).query(X, k=max(neighbours) + 1)
+    a, b = nb[:, neighbours[0]], nb[:, neighbours[1]]
+    n_s = vertex_normals(source.V, source.F)[source.samples]
+    o_s = np.sign(np.einsum("ij,ij->i", np.cross(X[a] - X, X[b] - X), n_s))
+    Y = target.V[p2p_samples]
+    n_t = vertex_normals(target.V, target.F)[p2p_samples]
+    o_t = np.sign(np.einsum("ij,ij->i", np.cross(Y[a] - Y, Y[b] - Y), n_t))
+    return float(np.mean(o_s * o_t))
+
+
+def hks_disagreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarray, n_times: int = 16) -> float:
+    """Mean relative difference of the heat kernel signatures (template's time scale on both meshes) between the
+    template samples and their images: it tells the front of a body from its back, which orientation does not
+    (the 180-degree turn swapping left/right *and* front/back preserves orientation)."""
+    from corr_core.correspondence import descriptors as desc
+
+    times = desc.hks_times(source.evals, n_times)
+    hs = desc.hks(source.evals, source.evecs[source.samples], times=times)
+    ht = desc.hks(target.evals, target.evecs[p2p_samples], times=times)
+    return float(np.mean(np.abs(hs - ht) / np.maximum(np.abs(hs) + np.abs(ht), 1e-300)))
+
+
+def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarray | None = None,
+                  points_target: np.ndarray | None = None, keep: int = 4, k_init: int = 40, k_end: int = 100,
+                  step: int = 5, return_info: bool = False):
+    """A map with no point given on the target (module docstring).
+
+    Args:
+        points_source, points_target: feature points of each mesh (default ``extremities`` of each).
+        keep: candidate assignments evaluated as full maps.
+    Returns: (C, p2p_samples) as ``map_from_points``; with ``return_info`` also a dict (points, the chosen
+        assignment, every candidate's cost and disagreement).
+    """
+    Ps = extremities(source) if points_source is None else np.asarray(points_source, dtype=np.int64)
+    Pt = extremities(target) if points_target is None else np.asarray(points_target, dtype=np.int64)
+    Gs, Gt = source.distances(Ps), target.distances(Pt)          # (p, n_s), (q, n_t), reused per candidate
+    Ds, Dt = Gs[:, Ps], Gt[:, Pt]
+    candidates = ranked_assignments(0.5 * (Ds + Ds.T), 0.5 * (Dt + Dt.T), keep=keep)
+    info = {"points_source": Ps, "points_target": Pt, "candidates": []}
+    for s, t, cost in candidates:
+        FS = point_features(source, Ps[s], distances=Gs[s])
+        FT = point_features(target, Pt[t], distances=Gt[t])
+        C, p2p = map_from_points(source, target, Ps[s], Pt[t], k_init=k_init, k_end=k_end, step=step,
+                                 features=(FS, FT))
+        info["candidates"].append({"source": s, "target": t, "distortion": cost, "map": (C, p2p),
+                                   "orientation": orientation_agreement(source, target, p2p),
+                                   "hks": hks_disagreement(source, target, p2p)})
+    # orientation-preserving candidates (agreement > 0; the mirror maps have < 0), then the best HKS agreement
+    cands = info["candidates"]
+    pool = [c for c in cands if c["orientation"] > 0] or [max(cands, key=lambda c: c["orientation"])]
+    chosen = min(pool, key=lambda c: c["hks"])
+    s, t = chosen["source"], chosen["target"]
+    info["chosen"] = (Ps[s], Pt[t])
+    C, p2p = chosen["map"]
+    return (C, p2p, info) if return_info else (C, p2p)

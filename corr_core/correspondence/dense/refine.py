@@ -1,0 +1,154 @@
+"""Pointwise steps after ZoomOut: full-resolution upsampling and a geodesic (trilateration) refinement.
+
+ZoomOut works in a truncated spectral basis and has a floor of its own (from the *true* map it ends near one edge
+length of mean error on the course SCAPE poses). The refinement here works on vertices directly:
+
+``refine_geodesic``: pick anchors (farthest-point template samples) and their current images on the target;
+compute geodesic distances from the anchors on both meshes (heat method); move every template vertex to the
+target vertex, among the ``n_candidates`` nearest (in 3D) to its current image, whose distances to the images
+of its ``n_near`` nearest anchors best match its own distances to those anchors (least squares) -- a local
+trilateration that holds for (near-)isometric pairs whatever the pose. Repeat with the new anchor images.
+Anchor errors average out over the ``n_near`` anchors, so the map gets below the spectral floor.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from corr_core.correspondence.dense.basis import MeshBasis
+
+
+def upsample_spectral(source: MeshBasis, target: MeshBasis, C: np.ndarray, p2p_samples: np.ndarray,
+                      n_candidates: int = 64) -> np.ndarray:
+    """Point map of every template vertex from a map known at the template samples and a functional map.
+
+    Each template vertex starts at the image of its nearest template sample (3D) and then takes, among the
+    ``n_candidates`` target vertices nearest (3D) to that image, the one nearest in the spectral embedding of
+    ``C`` (the ZoomOut point map restricted to a neighbourhood; exact brute force would cost n_s * n_t * k).
+
+    Args:
+        source, target: bases; C: (k_s, k_t) functional map (template x target).
+        p2p_samples: (len(source.samples),) int target vertex of each template sample (same order).
+        n_candidates: neighbourhood size on the target.
+    Returns: (n_s,) int target vertex ids.
+    """
+    samples = source.samples[:len(p2p_samples)]
+    _, nearest_sample = cKDTree(source.V[samples]).query(source.V)
+    start = np.asarray(p2p_samples)[nearest_sample]
+    n_candidates = min(n_candidates, target.n)
+    _, cands = cKDTree(target.V).query(target.V[start], k=n_candidates)   # (n_s, c)
+    ks, kt = C.shape
+    emb_s = source.evecs[:, :ks] @ C                                     # (n_s, kt)
+    emb_t = target.evecs[:, :kt]
+    out = np.empty(source.n, dtype=np.int64)
+    for s in range(0, source.n, 2048):                                   # chunks bound memory (c * kt each)
+        c = cands[s:s + 2048]
+        d = np.sum((emb_t[c] - emb_s[s:s + 2048, None, :]) ** 2, axis=2)
+        out[s:s + 2048] = c[np.arange(len(c)), np.argmin(d, axis=1)]
+    return out
+
+
+def refine_geodesic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, n_anchors: int = 100,
+                    n_near: int = 12, n_candidates: int = 32, iterations: int = 3, min_anchor_distance: float = 0.02,
+                    source_anchor_distances: np.ndarray | None = None) -> np.ndarray:
+    """Geodesic trilateration refinement of a dense map (module docstring).
+
+    Args:
+        source, target: bases; p2p: (n_s,) int current target vertex of each template vertex.
+        n_anchors: number of anchors (the first farthest-point samples of the template).
+        n_near: anchors used per vertex (its geodesically nearest ones beyond ``min_anchor_distance``).
+        n_candidates: target vertices considered per template vertex (3D nearest to its current image).
+        iterations: rounds (anchor images are updated between rounds).
+        min_anchor_distance: anchors closer than this (units sqrt(area)) are skipped for a vertex: the heat
+            method smooths distances near the source.
+        source_anchor_distances: optional (n_anchors, n_s) template distances from the anchors / sqrt(area),
+            to reuse across targets (``source.distances(source.samples[:n_anchors])``).
+    Returns: (n_s,) int refined map.
+    """
+    p2p = np.asarray(p2p, dtype=np.int64).copy()
+    anchors = source.samples[:n_anchors]
+    D_s = source.distances(anchors) if source_anchor_distances is None else source_anchor_distances
+    if D_s.shape != (len(anchors), source.n):
+        raise ValueError(f"source_anchor_distances must be ({len(anchors)}, {source.n}), got {D_s.shape}")
+    n_near = min(n_near, len(anchors))
+    far = np.where(D_s >= min_anchor_distance, D_s, np.inf)
+    near = np.argsort(far, axis=0, kind="stable")[:n_near].T              # (n_s, n_near) anchor indices
+    d_src = np.take_along_axis(D_s.T, near, axis=1)                        # (n_s, n_near)
+    tree = cKDTree(target.V)
+    n_candidates = min(n_candidates, target.n)
+    for _ in range(iterations):
+        D_t = target.distances(p2p[anchors]).T                              # (n_t, n_anchors)
+        _, cands = tree.query(target.V[p2p], k=n_candidates)                 # (n_s, c)
+        new = np.empty_like(p2p)
+        for s in range(0, source.n, 2048):
+            c = cands[s:s + 2048]                                             # (b, c)
+            nr = near[s:s + 2048]                                             # (b, n_near)
+            dt = D_t[c[:, :, None], nr[:, None, :]]                           # (b, c, n_near)
+            cost = np.sum((dt - d_src[s:s + 2048, None, :]) ** 2, axis=2)
+            new[s:s + 2048] = c[np.arange(len(c)), np.argmin(cost, axis=1)]
+        if np.array_equal(new, p2p):
+            break
+        p2p = new
+    return p2p
+
+
+def _kabsch_batch(X: np.ndarray, Y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted rigid fits, batched: X, Y: (b,p,3), w: (b,p) >= 0 -> R (b,3,3), t (b,3) minimizing
+    sum_i w_i |R x_i + t - y_i|^2 per batch entry (reflections excluded)."""
+    w = w / np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
+    mx = np.einsum("bp,bpc->bc", w, X)
+    my = np.einsum("bp,bpc->bc", w, Y)
+    H = np.einsum("bp,bpi,bpj->bij", w, X - mx[:, None], Y - my[:, None])
+    U, _, Wt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(np.einsum("bji,bkj->bik", Wt, U)))       # det(W U^T)
+    D = np.zeros_like(H)
+    D[:, 0, 0] = 1.0
+    D[:, 1, 1] = 1.0
+    D[:, 2, 2] = np.where(d == 0, 1.0, d)
+    R = np.einsum("bji,bjk,blk->bil", Wt, D, U)                        # W D U^T
+    return R, my - np.einsum("bij,bj->bi", R, mx)
+
+
+def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, n_patches: int = 300,
+                     patch_size: int = 64, icp_iterations: int = 8, rounds: int = 6, trim: float = 2.0,
+                     n_candidates: int = 32) -> np.ndarray:
+    """Local rigid alignment (patch-wise ICP) of the template onto the target, then nearest vertices.
+
+    A body moves almost rigidly at the scale of a small patch, so each template patch -- the ``patch_size``
+    template samples geodesically nearest to one of the first ``n_patches`` farthest-point samples (about a
+    geodesic disc of radius sqrt(patch_size / (pi * n_samples)) sqrt(area)) -- is aligned to the target: a rigid
+    fit to its current images, then ``icp_iterations`` of point-to-point ICP against the target vertices (pairs
+    farther than ``trim`` x the patch's median distance get no weight). Every template vertex is moved by the
+    transform of its geodesically nearest patch centre and takes the target vertex nearest to its moved position
+    among the ``n_candidates`` nearest (3D) to its current image (so it cannot jump to a touching body part).
+    ``rounds`` repeats this from the new map. Template geodesics come from ``source.sample_distances`` (cached,
+    once per template); the target needs none.
+
+    Args: source, target: bases; p2p: (n_s,) int current map. Returns (n_s,) int refined map.
+    """
+    p2p = np.asarray(p2p, dtype=np.int64).copy()
+    n_patches = min(n_patches, len(source.samples))
+    patch_size = min(patch_size, len(source.samples))
+    D_c = source.sample_distances(n_patches)                        # (n_patches, n_s)
+    owner = np.argmin(D_c, axis=0)                                   # nearest patch centre of every vertex
+    near = np.argsort(D_c[:, source.samples], axis=1, kind="stable")[:, :patch_size]
+    members = source.samples[near]                                   # (n_patches, patch_size) vertex ids
+    X = source.V[members]                                            # (b, p, 3)
+    tree = cKDTree(target.V)
+    n_candidates = min(n_candidates, target.n)
+    for _ in range(rounds):
+        R, t = _kabsch_batch(X, target.V[p2p[members]], np.ones(members.shape))
+        for _ in range(icp_iterations):
+            moved = np.einsum("bij,bpj->bpi", R, X) + t[:, None, :]
+            d, j = tree.query(moved.reshape(-1, 3))
+            d, j = d.reshape(members.shape), j.reshape(members.shape)
+            w = (d <= trim * np.median(d, axis=1, keepdims=True) + 1e-12).astype(float)
+            R, t = _kabsch_batch(X, target.V[j], w)
+        moved = np.einsum("nij,nj->ni", R[owner], source.V) + t[owner]
+        _, cands = tree.query(target.V[p2p], k=n_candidates)
+        d = np.linalg.norm(target.V[cands] - moved[:, None, :], axis=2)
+        new = cands[np.arange(source.n), np.argmin(d, axis=1)]
+        if np.array_equal(new, p2p):
+            break
+        p2p = new
+    return p2p

@@ -1,0 +1,58 @@
+"""ZoomOut (Melzi et al. 2019): spectral upsampling of a correspondence.
+
+Alternate (1) the least-squares functional map of the current point map with k basis functions and (2) the point
+map of that functional map (nearest neighbours in the spectral embedding), growing k by ``step`` from ``k_start``
+to ``k_end``. Iterations run on farthest-point samples of both meshes (``MeshBasis.samples``: the cost is then
+independent of the vertex count); ``zoomout_full`` then gives every template vertex its target vertex with the
+final functional map. See ``corr_core.correspondence.dense.fmaps`` for the conventions (template -> target).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from corr_core.correspondence.dense.basis import MeshBasis
+from corr_core.correspondence.dense.fmaps import fmap_from_p2p, nearest_rows, p2p_from_fmap
+
+
+def zoomout(source: MeshBasis, target: MeshBasis, C: np.ndarray, k_end: int = 100, step: int = 5,
+            n_source: int | None = None, n_target: int | None = None) -> np.ndarray:
+    """Refine a functional map by ZoomOut on the meshes' samples.
+
+    Args:
+        source, target: template and target bases (with >= k_end eigenpairs each; k_end is clipped).
+        C: (k0, k0') initial functional map (template x target); k_start = min(k0, k0').
+        k_end: final basis size; step: growth of k per iteration.
+        n_source, n_target: how many of the meshes' farthest-point samples to use (default all of them).
+    Returns:
+        C: (k_end, k_end) refined functional map.
+    """
+    k_end = int(min(k_end, source.evecs.shape[1], target.evecs.shape[1]))
+    rows = source.samples[:n_source]
+    cands = target.samples[:n_target]
+    k = min(C.shape)
+    C = C[:k, :k]
+    while True:
+        match = p2p_from_fmap(C, source.evecs[rows, :k], target.evecs[cands, :k])
+        if k >= k_end:
+            return C
+        k = min(k + step, k_end)
+        C = fmap_from_p2p(cands[match], source.evecs[rows, :k], target.evecs[:, :k])
+
+
+def zoomout_from_p2p(source: MeshBasis, target: MeshBasis, p2p_rows: np.ndarray, k_start: int = 20,
+                     k_end: int = 100, step: int = 5, n_source: int | None = None,
+                     n_target: int | None = None) -> np.ndarray:
+    """ZoomOut started from a point map given at the source samples.
+
+    Args: p2p_rows: (len(source.samples[:n_source]),) target vertex of each template sample.
+    Returns: C: (k_end, k_end).
+    """
+    rows = source.samples[:n_source]
+    C = fmap_from_p2p(np.asarray(p2p_rows), source.evecs[rows, :k_start], target.evecs[:, :k_start])
+    return zoomout(source, target, C, k_end=k_end, step=step, n_source=n_source, n_target=n_target)
+
+
+def p2p_full(source: MeshBasis, target: MeshBasis, C: np.ndarray) -> np.ndarray:
+    """Every template vertex's nearest target vertex in the spectral embedding of C: (n_s,) int."""
+    ks, kt = C.shape
+    return nearest_rows(source.evecs[:, :ks] @ C, target.evecs[:, :kt])

@@ -1,0 +1,71 @@
+"""Per-mesh inputs of the landmark matchers (``corr_core.correspondence.matchers``), computed once per mesh.
+
+- ``spectral_features``: HKS and WKS at the landmarks (descriptor matching);
+- ``geodesic_features``: diameter-normalized landmark geodesics and landmark chirality (geodesic MRF);
+- ``flattening_features``: the mid-edge flattening, its local scale and surface samples (Möbius voting).
+
+Meshes are V: (n,3) float, F: (m,3) int; landmarks are (L,) int vertex ids.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from corr_core.correspondence import descriptors
+from corr_core.correspondence.orientation import landmark_chirality
+from corr_core.geometry import laplacian, midedge
+from corr_core.geometry.geodesic import GeodesicSolver
+from corr_core.geometry.sampling import farthest_point_samples
+
+__all__ = ["spectral_features", "geodesic_features", "flattening_features"]
+
+
+def spectral_features(V: np.ndarray, F: np.ndarray, landmark_vids: np.ndarray, k: int = 100, n_times: int = 16,
+                      n_energies: int = 100, wks_variance: float = 6.0) -> dict:
+    """HKS and WKS at the landmark vertices from the first k Laplace-Beltrami eigenpairs.
+
+    Returns {"hks": (L, n_times) float64, "wks": (L, n_energies) float64, "evals": (k,) 1/area units}.
+    """
+    evals, evecs = laplacian.eigenpairs(V, F, k=k)
+    at = evecs[landmark_vids]
+    return {"hks": descriptors.hks(evals, at, n_times=n_times).astype(np.float64),
+            "wks": descriptors.wks(evals, at, n_energies=n_energies, variance=wks_variance).astype(np.float64),
+            "evals": np.asarray(evals)}
+
+
+def geodesic_features(V: np.ndarray, F: np.ndarray, landmark_vids: np.ndarray) -> dict:
+    """Landmark geodesic distances normalized by the geodesic diameter, and landmark chirality.
+
+    Returns {"D": (L,L) float (symmetric, zero diagonal), "diameter": float (length units of V),
+    "chirality": (L,L,L) float}.
+    """
+    solver = GeodesicSolver(V, F)
+    vids = np.asarray(landmark_vids, dtype=np.int64)
+    D = solver.distances(vids)[:, vids]
+    D = 0.5 * (D + D.T)  # the heat method's small asymmetry averaged out
+    np.fill_diagonal(D, 0.0)
+    diameter = solver.diameter()
+    return {"D": D / diameter, "diameter": float(diameter), "chirality": landmark_chirality(V, F, vids)}
+
+
+def flattening_features(V: np.ndarray, F: np.ndarray, landmark_vids: np.ndarray, Z: np.ndarray | None = None,
+                        sample_vids: np.ndarray | None = None, n_samples: int = 300) -> dict:
+    """Mid-edge flattening (one complex point per edge, ``midedge.midedge_flatten``) and surface samples.
+
+    Z: (E,) complex, a given flattening with the same edge numbering to use instead of the computed one.
+    sample_vids: (S,) int vertices whose edges are the samples; None: ``n_samples`` farthest-point samples of
+    the edge midpoints, started at the midpoint farthest from their mean.
+    Returns {"Z": (E,2) float (x, y), "lam": (E,) local scale of the flattening (planar length per unit
+    surface length), "landmark_eids": (L,) int, "sample_eids": (S,) int, "edges": (E,2) int}.
+    """
+    Z_computed, edges, face_edges, kept = midedge.midedge_flatten(V, F)
+    Z = Z_computed if Z is None else np.asarray(Z)
+    lam = midedge.midedge_conformal_factor(V, edges, face_edges, kept, Z, F)
+    if sample_vids is not None:
+        sample_eids = np.array([midedge.vertex_to_edge(int(v), edges) for v in sample_vids], dtype=np.int64)
+    else:
+        M = midedge.edge_midpoints(V, edges)
+        start = int(np.argmax(np.linalg.norm(M - M.mean(axis=0), axis=1)))
+        sample_eids = farthest_point_samples(M, n_samples, start=start)
+    eids = np.array([midedge.vertex_to_edge(int(v), edges) for v in landmark_vids], dtype=np.int64)
+    return {"Z": np.stack([Z.real, Z.imag], axis=1), "lam": lam, "landmark_eids": eids,
+            "sample_eids": np.asarray(sample_eids, dtype=np.int64), "edges": edges.astype(np.int64)}

@@ -1,0 +1,306 @@
+"""Repair a triangle mesh on load without ever renumbering its vertices.
+
+Published scans carry duplicated faces (also in the opposite orientation), faces repeating a vertex, zero-area
+faces, unreferenced vertices, inconsistent face orientation, stray pieces and holes. ``repair_mesh`` fixes what
+can be fixed by changing only the *faces*: vertex ``i`` stays vertex ``i``, so ground truth such as "vertex i
+matches vertex i" and landmark vertex ids survive. Vertices that no face uses afterwards are simply ignored
+(``normalize_mesh`` and the renderer use referenced vertices only).
+
+Every finding is a record (a plain, JSON-ready dict)::
+
+    {"file": name, "kind": "duplicate_faces", "action": "dropped", "count": 2, "level": "repair",
+     "message": "scan.obj: dropped 2 duplicate face(s) ..."}
+
+``level`` is "repair" (the faces were changed or vertices are ignored), "warning" (a defect that remains and
+may matter, e.g. non-manifold edges) or "note" (informational: boundary loops, components kept).
+What cannot be made usable raises ``MeshError`` with the reason and the fix.
+"""
+from __future__ import annotations
+
+import functools
+import os
+import warnings
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import breadth_first_order, connected_components
+
+from corr_core.geometry.mesh_io import MeshError, check_mesh, load_mesh
+from corr_core.geometry.primitives import face_areas, vertex_components
+
+__all__ = ["repair_mesh", "load_repaired_mesh", "orient_faces", "warn_repairs", "repair_messages", "compact_mesh"]
+
+
+def _record(name: str, kind: str, action: str, count: int, level: str, message: str) -> dict:
+    return {"file": name, "kind": kind, "action": action, "count": int(count), "level": level,
+            "message": f"{name}: {message}"}
+
+
+def _bbox_diagonal2(V: np.ndarray, F: np.ndarray) -> float:
+    """Squared bounding-box diagonal of the vertices that F: (m,3) uses (length^2)."""
+    used = V[np.unique(F)]
+    return float(np.sum((used.max(axis=0) - used.min(axis=0)) ** 2))
+
+
+def _drop_repeated_index(F: np.ndarray, file_ids: np.ndarray, name: str, records: list) -> np.ndarray:
+    """Keep-mask (m,) bool of the faces with three distinct vertices. file_ids: (m,) face numbers in the file."""
+    bad = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
+    if bad.any():
+        records.append(_record(name, "degenerate_faces", "dropped", bad.sum(), "repair",
+                               f"dropped {int(bad.sum())} face(s) that repeat a vertex (first: face "
+                               f"{int(file_ids[bad][0])})"))
+    return ~bad
+
+
+def _orientation_sign(F: np.ndarray) -> np.ndarray:
+    """(m,) +1 / -1: whether each face's vertex order is an even or odd permutation of its sorted order."""
+    a, b, c = F[:, 0], F[:, 1], F[:, 2]
+    return np.sign((b - a) * (c - a) * (c - b))
+
+
+def _drop_duplicates(F: np.ndarray, file_ids: np.ndarray, name: str, records: list) -> np.ndarray:
+    """Keep-mask (m,) bool: the first face of every vertex triple; later copies (either orientation) go."""
+    S = np.sort(F, axis=1)
+    n = int(S.max()) + 1
+    key = (S[:, 0] * n + S[:, 1]) * n + S[:, 2] if n < 2_000_000 else S  # n^3 < 2^63
+    _, first, inverse = np.unique(key, axis=0 if key.ndim == 2 else None, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    keep = np.zeros(len(F), dtype=bool)
+    keep[first] = True
+    if not keep.all():
+        dup = np.flatnonzero(~keep)
+        opposite = int(np.sum(_orientation_sign(F[dup]) != _orientation_sign(F[first[inverse[dup]]])))
+        records.append(_record(name, "duplicate_faces", "dropped", len(dup), "repair",
+                               f"dropped {len(dup)} duplicate face(s) ({len(dup) - opposite} same orientation, "
+                               f"{opposite} opposite orientation; first: face {int(file_ids[dup[0]])} repeats "
+                               f"face {int(file_ids[first[inverse[dup[0]]]])})"))
+    return keep
+
+
+def _drop_zero_area(V: np.ndarray, F: np.ndarray, file_ids: np.ndarray, name: str, records: list,
+                    area_tol: float = 1e-12) -> np.ndarray:
+    """Keep-mask (m,) bool of the faces with area > area_tol * (bounding-box diagonal)^2."""
+    tiny = area_tol * max(_bbox_diagonal2(V, F), np.finfo(float).tiny)
+    bad = face_areas(V, F) <= tiny
+    if bad.any():
+        records.append(_record(name, "zero_area_faces", "dropped", bad.sum(), "repair",
+                               f"dropped {int(bad.sum())} zero-area face(s) (area <= {area_tol:g} x bbox "
+                               f"diagonal^2; first: face {int(file_ids[bad][0])})"))
+    return ~bad
+
+
+def _half_edges(F: np.ndarray) -> np.ndarray:
+    """(3m,2) the half-edges (a,b), (b,c), (c,a) of every face, face-major."""
+    return np.stack([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]], axis=1).reshape(-1, 2)
+
+
+def _edge_keys(pairs: np.ndarray) -> np.ndarray:
+    """(k,) int64 key of each undirected vertex pair (k,2), equal for (a,b) and (b,a) (fast np.unique)."""
+    n = int(pairs.max()) + 1 if len(pairs) else 1
+    return np.minimum(pairs[:, 0], pairs[:, 1]) * n + np.maximum(pairs[:, 0], pairs[:, 1])
+
+
+def _edge_counts(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unique undirected edges (e,2) int (rows sorted, lexicographic order) and the faces using each (e,)."""
+    half = _half_edges(F)
+    _, first, counts = np.unique(_edge_keys(half), return_index=True, return_counts=True)
+    return np.sort(half[first], axis=1), counts
+
+
+def _interior_edge_pairs(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The two faces of every manifold interior edge and whether they traverse it the same way.
+
+    Returns fa, fb: (e,) int face ids; same_direction: (e,) bool (True = inconsistently oriented pair).
+    """
+    half = _half_edges(F)
+    face_of = np.repeat(np.arange(len(F)), 3)
+    _, inverse, counts = np.unique(_edge_keys(half), return_inverse=True, return_counts=True)
+    inverse = inverse.ravel()
+    interior = np.flatnonzero(counts[inverse] == 2)
+    paired = interior[np.argsort(inverse[interior], kind="stable")]
+    a, b = paired[0::2], paired[1::2]
+    return face_of[a], face_of[b], half[a, 0] == half[b, 0]
+
+
+def orient_faces(F: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """Orient the faces consistently within each edge-connected patch, keeping the majority orientation.
+
+    Faces are joined across manifold edges (exactly two faces); a breadth-first walk from each patch's lowest
+    face decides which faces to flip, and a patch whose walk would flip more than half its faces is flipped the
+    other way, so a mostly well-oriented scan keeps its orientation. A flip reverses a face's vertex order (so a
+    face stored reversed gets back its original row).
+
+    Args:
+        F: (m,3) int faces without duplicates.
+    Returns:
+        F2: (m,3) int oriented faces (same rows, same vertex sets); n_flipped: faces flipped;
+        n_inconsistent: interior edges still traversed the same way by both faces (a non-orientable surface).
+    """
+    F = np.asarray(F, dtype=np.int64)
+    m = len(F)
+    fa, fb, same = _interior_edge_pairs(F)
+    if not same.any():
+        return F.copy(), 0, 0
+    root = m  # a virtual face joined to the first face of every patch, so one walk covers all patches
+    n_patch, patch = connected_components(sp.coo_matrix((np.ones(len(fa)), (fa, fb)), shape=(m, m)),
+                                          directed=False)
+    starts = np.full(n_patch, m, dtype=np.int64)
+    np.minimum.at(starts, patch, np.arange(m))
+    rows = np.concatenate([fa, fb, np.full(n_patch, root)])
+    cols = np.concatenate([fb, fa, starts])
+    parity = np.concatenate([same, same, np.zeros(n_patch, dtype=bool)]).astype(np.int8) + 1  # 1 keep, 2 flip
+    graph = sp.csr_matrix((parity, (rows, cols)), shape=(m + 1, m + 1))
+    order, pred = breadth_first_order(graph, root, directed=True, return_predecessors=True)
+    order = order[1:]
+    step = np.asarray(graph[pred[order], order]).ravel() == 2
+    flip = np.zeros(m + 1, dtype=bool)
+    for node, parent, s in zip(order.tolist(), pred[order].tolist(), step.tolist()):
+        flip[node] = flip[parent] ^ s
+    flip = flip[:m]
+    flipped_per_patch = np.bincount(patch, weights=flip, minlength=n_patch)
+    invert = 2 * flipped_per_patch > np.bincount(patch, minlength=n_patch)
+    flip ^= invert[patch]
+    out = F.copy()
+    out[flip] = out[flip][:, ::-1]
+    _, _, still = _interior_edge_pairs(out)
+    return out, int(flip.sum()), int(still.sum())
+
+
+def _orient(F: np.ndarray, name: str, records: list) -> np.ndarray:
+    F, n_flipped, n_inconsistent = orient_faces(F)
+    if n_flipped:
+        records.append(_record(name, "reoriented_faces", "flipped", n_flipped, "repair",
+                               f"flipped {n_flipped} face(s) to a consistent orientation"))
+    if n_inconsistent:
+        records.append(_record(name, "non_orientable_edges", "kept", n_inconsistent, "warning",
+                               f"{n_inconsistent} edge(s) cannot be oriented consistently (non-orientable "
+                               "surface); orientation-dependent results may be unreliable"))
+    return F
+
+
+def _report_non_manifold(F: np.ndarray, name: str, records: list) -> None:
+    E, count = _edge_counts(F)
+    bad = count > 2
+    if bad.any():
+        first = E[np.flatnonzero(bad)[0]]
+        records.append(_record(name, "non_manifold_edges", "kept", bad.sum(), "warning",
+                               f"{int(bad.sum())} non-manifold edge(s) shared by more than two faces remain after "
+                               f"removing duplicates (first: ({int(first[0])}, {int(first[1])}))"))
+
+
+def _components(V: np.ndarray, F: np.ndarray, keep_largest: bool, name: str, records: list) -> np.ndarray:
+    _, labels = vertex_components(len(V), F)
+    face_label = labels[F[:, 0]]
+    present = np.unique(face_label)
+    if len(present) < 2:
+        return F
+    area = np.bincount(face_label, weights=face_areas(V, F), minlength=labels.max() + 1)
+    best = int(np.argmax(area))  # ties: the component with the lowest vertex id
+    if not keep_largest:
+        records.append(_record(name, "components", "kept", len(present), "note",
+                               f"{len(present)} connected components (all kept)"))
+        return F
+    keep = face_label == best
+    n_lost = len(np.setdiff1d(np.unique(F[~keep]), np.unique(F[keep])))
+    records.append(_record(name, "components", "dropped", len(present) - 1, "repair",
+                           f"kept the largest of {len(present)} connected components ({area[best] / area.sum():.1%} "
+                           f"of the area); dropped {int((~keep).sum())} face(s), {n_lost} vertex/vertices are now "
+                           "unreferenced (vertex ids unchanged)"))
+    return F[keep]
+
+
+def _report_unreferenced(n_vertices: int, F: np.ndarray, name: str, records: list) -> None:
+    unused = np.setdiff1d(np.arange(n_vertices), np.unique(F))
+    if len(unused):
+        records.append(_record(name, "unreferenced_vertices", "ignored", len(unused), "repair",
+                               f"{len(unused)} vertex/vertices used by no face are ignored (first: vertex "
+                               f"{int(unused[0])}); they take no part in normalization or rendering"))
+
+
+def _report_boundary(F: np.ndarray, name: str, records: list) -> None:
+    E, count = _edge_counts(F)
+    border = E[count == 1]
+    if len(border) == 0:
+        return
+    ids, local = np.unique(border, return_inverse=True)
+    local = local.reshape(-1, 2)
+    A = sp.coo_matrix((np.ones(len(local)), (local[:, 0], local[:, 1])), shape=(len(ids), len(ids)))
+    n_loops, labels = connected_components(A, directed=False)
+    sizes = np.bincount(labels[local[:, 0]], minlength=n_loops)
+    records.append(_record(name, "boundary", "kept", n_loops, "note",
+                           f"{len(border)} boundary edge(s) in {n_loops} loop(s) (open surface or holes, not "
+                           f"filled; smallest loop {int(sizes.min())} edges, largest {int(sizes.max())})"))
+
+
+def repair_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", *, keep_largest_component: bool = False,
+                orient: bool = True, area_tol: float = 1e-12) -> tuple[np.ndarray, list[dict]]:
+    """Repair the faces of a mesh; vertices and their ids are never changed.
+
+    Steps, each reported when it finds something: drop faces repeating a vertex; drop duplicate faces (same
+    three vertices in either orientation; the first is kept); drop zero-area faces; orient faces consistently
+    (``orient``); report remaining non-manifold edges; keep only the largest connected component by area
+    (``keep_largest_component``, for intrinsic methods) or report the components; report unreferenced vertices
+    and boundary loops.
+
+    Args:
+        V: (n,3) float vertex positions; F: (m,3) int faces; name: the file, for messages.
+        keep_largest_component: drop every face outside the largest component (its vertices become unreferenced).
+        orient: make the face orientation consistent.
+        area_tol: a face is zero-area when area <= area_tol * (bounding-box diagonal)^2.
+    Returns:
+        F2: (m2,3) int64 repaired faces (a subset of the rows of F, some with their vertex order reversed);
+        records: list of dicts (see the module docstring), in the order of the steps.
+    Raises:
+        MeshError: no faces, out-of-range indices, NaN/inf coordinates of a used vertex, or no valid face left.
+    """
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
+    check_mesh(V, F, name=name)
+    records: list[dict] = []
+    file_ids = np.arange(len(F))
+    for step in (_drop_repeated_index, _drop_duplicates, functools.partial(_drop_zero_area, V, area_tol=area_tol)):
+        if len(F):
+            keep = step(F, file_ids, name, records)
+            F, file_ids = F[keep], file_ids[keep]
+    if len(F) == 0:
+        raise MeshError(f"{name}: no valid face left after removing degenerate and zero-area faces; "
+                        "the file has no usable surface (export it again as a triangle mesh)")
+    if orient:
+        F = _orient(F, name, records)
+    _report_non_manifold(F, name, records)
+    F = _components(V, F, keep_largest_component, name, records)
+    _report_unreferenced(len(V), F, name, records)
+    _report_boundary(F, name, records)
+    return F, records
+
+
+def load_repaired_mesh(path: str | os.PathLike, *, keep_largest_component: bool = False, orient: bool = True,
+                       name: str | None = None) -> tuple[np.ndarray, np.ndarray, list[dict]]:
+    """``load_mesh`` then ``repair_mesh``: (V (n,3) float64 in file order, F (m,3) int64 repaired, records).
+
+    name: how messages name the file (default: the path).
+    """
+    path = os.fspath(path)
+    V, F = load_mesh(path)
+    F, records = repair_mesh(V, F, name or path, keep_largest_component=keep_largest_component, orient=orient)
+    return V, F, records
+
+
+def repair_messages(records: list[dict], levels: tuple = ("repair", "warning")) -> list[str]:
+    """The messages of the records whose level is in ``levels``."""
+    return [r["message"] for r in records if r["level"] in levels]
+
+
+def warn_repairs(records: list[dict], levels: tuple = ("repair", "warning")) -> None:
+    """One ``UserWarning`` per repair / remaining defect (each message names the file)."""
+    for message in repair_messages(records, levels):
+        warnings.warn(message, UserWarning, stacklevel=2)
+
+
+def compact_mesh(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The referenced vertices only, for consumers that need no vertex ids (rendering, bounds).
+
+    Args: V: (n,3) float; F: (m,3) int. Returns: V2: (k,3) = V[used] (used increasing), F2: (m,3) re-indexed.
+    """
+    used, F2 = np.unique(np.asarray(F), return_inverse=True)
+    return np.asarray(V)[used], F2.reshape(-1, 3).astype(np.int64)

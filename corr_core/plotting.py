@@ -1,0 +1,168 @@
+"""All figures of the project (matplotlib, Agg backend): alignment figures and correspondence figures.
+
+Every function takes numpy arrays (and names), writes one image file to ``path`` (PNG or PDF by extension)
+and returns nothing. View stacks are (V, S, S) uint8 grayscale (255 = white background); features (V, D).
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from corr_core.alignment.azimuth import aligned_view_index
+from corr_core.alignment.hog import draw_hog
+
+__all__ = ["plot_hog_drawings", "plot_pair_cost_heatmap", "plot_view_pairs", "plot_aligned_grid",
+           "plot_contact_sheet", "plot_frequency_matrix", "plot_error_curves", "plot_accuracy_bars"]
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path: str | os.PathLike, dpi: int) -> None:
+    plt = _pyplot()
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
+# ------------------------------------------------------------------------------------------------ alignment
+
+def _hog_cells(H: np.ndarray):
+    """(h, w, 36) cells of a flattened Dollar HoG vector, or None for other layouts."""
+    side = int(round(np.sqrt(H.size / 36)))
+    return H.reshape(side, side, 36) if side * side * 36 == H.size else None
+
+
+def plot_hog_drawings(views: dict, features: dict, shapes: list[str], view_ids: list[int], path) -> None:
+    """Each shape's chosen views next to their HoG glyph drawings. views {name: (V,S,S)}, features {name: (V,D)}."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(len(shapes), 2 * len(view_ids), figsize=(4.0 * len(view_ids), 2.1 * len(shapes)))
+    axes = np.atleast_2d(axes)
+    for r, n in enumerate(shapes):
+        V = len(views[n])
+        for c, k in enumerate(view_ids):
+            axes[r, 2 * c].imshow(views[n][k % V], cmap="gray", vmin=0, vmax=255)
+            axes[r, 2 * c].set_title(f"{n} view {k % V}", fontsize=8)
+            cells = _hog_cells(np.asarray(features[n][k % V]))
+            if cells is not None:
+                axes[r, 2 * c + 1].imshow(draw_hog(cells), cmap="gray")
+                axes[r, 2 * c + 1].set_title("HoG", fontsize=8)
+    for ax in axes.ravel():
+        ax.axis("off")
+    _save(fig, path, 90)
+
+
+def plot_pair_cost_heatmap(C_ab: np.ndarray, a: str, b: str, path) -> None:
+    """Heat map of D_ij(t1, t2) = C_ij(t2 - t1) for the pair costs C_ab: (V,) of shapes a, b."""
+    plt = _pyplot()
+    V = len(C_ab)
+    t = np.arange(V)
+    fig, ax = plt.subplots(figsize=(5, 4.3))
+    im = ax.imshow(np.asarray(C_ab)[(t[None, :] - t[:, None]) % V], cmap="viridis")
+    ax.set_xlabel(f"label t2 of {b}")
+    ax.set_ylabel(f"label t1 of {a}")
+    ax.set_title(f"D_ij(t1,t2) = C_ij(t2-t1), {a} vs {b}")
+    fig.colorbar(im, ax=ax)
+    _save(fig, path, 90)
+
+
+def plot_view_pairs(views_a: np.ndarray, views_b: np.ndarray, features_a: np.ndarray, features_b: np.ndarray,
+                    a: str, b: str, path) -> None:
+    """The most and the least similar view pair of shapes a and b (squared HoG distance per view)."""
+    plt = _pyplot()
+    Fa, Fb = np.asarray(features_a, np.float64), np.asarray(features_b, np.float64)
+    d = (Fa ** 2).sum(1)[:, None] + (Fb ** 2).sum(1)[None, :] - 2 * Fa @ Fb.T
+    best, worst = np.unravel_index(np.argmin(d), d.shape), np.unravel_index(np.argmax(d), d.shape)
+    fig, axes = plt.subplots(2, 2, figsize=(5, 5))
+    for r, (pair, title) in enumerate(((best, "best"), (worst, "worst"))):
+        for c, (shape, stack, k) in enumerate(((a, views_a, pair[0]), (b, views_b, pair[1]))):
+            axes[r, c].imshow(stack[k], cmap="gray", vmin=0, vmax=255)
+            axes[r, c].set_title(f"{title}: {shape} view {k}" + (f" (d={d[pair]:.1f})" if c else ""), fontsize=8)
+            axes[r, c].axis("off")
+    _save(fig, path, 90)
+
+
+def plot_aligned_grid(views: dict, labels: dict, shapes: list[str], path) -> None:
+    """3x3 grid of aligned shapes: each shape's view at the common frame's view 0. labels {name: int}."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(3, 3, figsize=(6, 6))
+    for ax, n in zip(axes.ravel(), shapes):
+        ax.imshow(views[n][aligned_view_index(int(labels[n]), len(views[n]))], cmap="gray", vmin=0, vmax=255)
+        ax.set_title(f"{n}: label {int(labels[n])}", fontsize=8)
+    for ax in axes.ravel():
+        ax.axis("off")
+    fig.suptitle("aligned shapes (common view 0)")
+    _save(fig, path, 90)
+
+
+def plot_contact_sheet(views: dict, names: list[str], labels: np.ndarray, path, columns: int = 10) -> None:
+    """All shapes' aligned view 0 in one image (to check an alignment by eye), ``columns`` per row."""
+    plt = _pyplot()
+    rows = int(np.ceil(len(names) / columns))
+    fig, axes = plt.subplots(rows, columns, figsize=(1.2 * columns, 1.3 * rows), squeeze=False)
+    for ax in axes.ravel():
+        ax.axis("off")
+    for ax, n, l in zip(axes.ravel(), names, labels):
+        ax.imshow(views[n][aligned_view_index(int(l), len(views[n]))], cmap="gray", vmin=0, vmax=255)
+        ax.set_title(n, fontsize=6)
+    _save(fig, path, 80)
+
+
+# ------------------------------------------------------------------------------------------- correspondence
+
+def plot_frequency_matrix(freq: np.ndarray, names_rows, names_cols, title: str, path) -> None:
+    """Heat map of a (n,L) frequency matrix with names on both axes."""
+    plt = _pyplot()
+    n, L = freq.shape
+    fig, ax = plt.subplots(figsize=(2.0 + 0.38 * L, 1.5 + 0.34 * n))
+    im = ax.imshow(freq, cmap="viridis", vmin=0.0, vmax=max(1.0, float(freq.max())), aspect="equal")
+    ax.set_xticks(range(L), labels=list(names_cols), rotation=60, ha="right", fontsize=8)
+    ax.set_yticks(range(n), labels=list(names_rows), fontsize=8)
+    ax.set_xlabel("test landmark (label)")
+    ax.set_ylabel("template landmark")
+    for i, a in zip(*np.nonzero(freq)):
+        ax.text(a, i, f"{freq[i, a]:.2f}".lstrip("0"), ha="center", va="center", fontsize=6,
+                color="black" if freq[i, a] > 0.6 else "white")
+    ax.set_title(title)
+    fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="fraction of test meshes")
+    _save(fig, path, 130)
+
+
+def plot_error_curves(curves: dict, path, title: str = "Geodesic error (Kim et al. 2011)") -> None:
+    """Cumulative error curves. curves: {label: (thresholds (T,), fractions (T,))}."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    colors = plt.get_cmap("tab10" if len(curves) <= 10 else "tab20")
+    for c, (label, (thr, frac)) in enumerate(curves.items()):
+        ax.plot(thr, 100 * np.asarray(frac), label=label, lw=1.8, color=colors(c % colors.N),
+                ls="-" if c < 10 else "--")
+    ax.set_xlabel("geodesic error / sqrt(area)")
+    ax.set_ylabel("% correspondences")
+    ax.set_ylim(0, 100)
+    ax.set_xlim(0, max(float(np.max(t)) for t, _ in curves.values()))
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right", fontsize=8)
+    ax.set_title(title)
+    _save(fig, path, 130)
+
+
+def plot_accuracy_bars(accuracy: dict[str, float], path) -> None:
+    """Bar chart of landmark accuracy per method {method: accuracy in [0, 1]}."""
+    plt = _pyplot()
+    names = list(accuracy)
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    ax.bar(names, [accuracy[n] for n in names], color="#4477aa")
+    for i, n in enumerate(names):
+        ax.text(i, accuracy[n] + 0.01, f"{accuracy[n]:.3f}", ha="center", fontsize=8)
+    ax.set_ylim(0, 1.08)
+    ax.set_ylabel("accuracy")
+    ax.set_title("landmark accuracy per method")
+    plt.setp(ax.get_xticklabels(), rotation=20, ha="right")
+    _save(fig, path, 110)

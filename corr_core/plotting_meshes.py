@@ -1,0 +1,280 @@
+"""Pictures of meshes with per-vertex colours and labelled points, rendered with the project's own CPU ray
+caster (Open3D ``RaycastingScene``, the cameras of ``corr_core.alignment.render``): no display needed.
+
+Conventions: meshes are V: (n,3) float, F: (m,3) int, y up; a mesh is normalised for the picture only
+(bounding-box centre at the origin, largest distance 1). Views are the cameras of
+``render.camera_frames(n_views)``: view k looks from azimuth k * 360 / n_views degrees (view 0 from +z).
+Images are (S, S, 3) float RGB in [0, 1], white background.
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from corr_core._open3d import load_open3d
+from corr_core.alignment.render import camera_frames, view_rays
+from corr_core.geometry.primitives import face_normals
+
+__all__ = ["normalise_for_picture", "render_colored", "project_vertices", "coordinate_colors",
+           "pull_back_colors", "crop_box", "plot_landmark_panels", "plot_dense_panels", "plot_azimuths"]
+
+MARGIN = 1.05
+
+
+def normalise_for_picture(V: np.ndarray) -> np.ndarray:
+    """V: (n,3) -> (n,3) float64 with its bounding-box centre at the origin and max distance 1."""
+    V = np.asarray(V, np.float64)
+    centred = V - (V.min(0) + V.max(0)) / 2
+    radius = float(np.linalg.norm(centred, axis=1).max()) or 1.0
+    return centred / radius
+
+
+def _scene(V: np.ndarray, F: np.ndarray):
+    o3d = load_open3d()
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(V, np.float32)), o3d.core.Tensor(np.asarray(F, np.uint32)))
+    return scene
+
+
+def _rays(view: int, n_views: int, size: int, elevation_deg: float):
+    return load_open3d().core.Tensor(view_rays(n_views, size, elevation_deg, MARGIN)[view])
+
+
+def render_colored(V: np.ndarray, F: np.ndarray, colors: np.ndarray, view: int = 0, n_views: int = 8,
+                   size: int = 320, elevation_deg: float = 10.0, ambient: float = 0.35) -> np.ndarray:
+    """Render a normalised mesh with per-vertex colours (interpolated over each triangle), headlight shading.
+
+    Args:
+        V: (n,3) normalised vertices (see :func:`normalise_for_picture`); F: (m,3) int.
+        colors: (n,3) float RGB in [0,1] per vertex.
+        view, n_views, elevation_deg: the camera (view k of ``camera_frames(n_views, elevation_deg)``).
+        size: pixels per side; ambient: shade = ambient + (1 - ambient) * |n . d|.
+    Returns:
+        (size, size, 3) float32 RGB in [0, 1], white background.
+    """
+    V, F, colors = np.asarray(V, np.float64), np.asarray(F, np.int64), np.asarray(colors, np.float64)
+    if colors.shape != (len(V), 3):
+        raise ValueError(f"colors must be (n_vertices, 3) = ({len(V)}, 3), got {colors.shape}")
+    hit = _scene(V, F).cast_rays(_rays(view, n_views, size, elevation_deg))
+    face = hit["primitive_ids"].numpy().astype(np.int64)
+    uv = hit["primitive_uvs"].numpy()
+    valid = np.isfinite(hit["t_hit"].numpy())
+    image = np.ones((size, size, 3), np.float32)
+    f, u, v = face[valid], uv[valid, 0], uv[valid, 1]
+    tri = F[f]
+    rgb = (1 - u - v)[:, None] * colors[tri[:, 0]] + u[:, None] * colors[tri[:, 1]] + v[:, None] * colors[tri[:, 2]]
+    back = camera_frames(n_views, elevation_deg)[view, 2]
+    shade = ambient + (1 - ambient) * np.abs(face_normals(V, F)[f] @ back)
+    image[valid] = np.clip(rgb * shade[:, None], 0, 1)
+    return image
+
+
+def project_vertices(V: np.ndarray, F: np.ndarray, vids: np.ndarray, view: int = 0, n_views: int = 8,
+                     size: int = 320, elevation_deg: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel positions of vertices ``vids`` (k,) in the picture of :func:`render_colored`, and whether each is
+    visible (not hidden by the surface).
+
+    Returns (xy (k,2) float pixel column/row, visible (k,) bool)."""
+    V = np.asarray(V, np.float64)
+    right, up, back = camera_frames(n_views, elevation_deg)[view]
+    P = V[np.asarray(vids, np.int64)]
+    half = size / 2
+    xy = np.stack([(P @ right / MARGIN + 1) * half, (1 - P @ up / MARGIN) * half], axis=1)
+    o3d = load_open3d()
+    origins = P + 3.0 * back
+    rays = np.concatenate([origins, np.broadcast_to(-back, origins.shape)], axis=1).astype(np.float32)
+    t_hit = _scene(V, F).cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+    return xy, t_hit >= 3.0 - 0.02
+
+
+def coordinate_colors(V: np.ndarray) -> np.ndarray:
+    """A smooth function on a mesh as colours: the normalised coordinates (x, y, z) as (R, G, B), (n,3) in [0,1]."""
+    V = np.asarray(V, np.float64)
+    lo, hi = V.min(0), V.max(0)
+    return (V - lo) / np.where(hi > lo, hi - lo, 1.0)
+
+
+def pull_back_colors(template_colors: np.ndarray, vertex_map: np.ndarray, target_V: np.ndarray) -> np.ndarray:
+    """Colours of the target vertices through a dense map template vertex i -> target vertex ``vertex_map[i]``.
+
+    template_colors: (n_s,3); vertex_map: (n_s,) int target vertex ids; target_V: (n_t,3). A target vertex
+    some template vertices map to gets their mean colour; the others take the colour of the nearest such
+    vertex (in 3D). Returns (n_t,3) float.
+    """
+    from scipy.spatial import cKDTree
+
+    vertex_map = np.asarray(vertex_map, np.int64)
+    n_t = len(target_V)
+    if vertex_map.shape != (len(template_colors),) or vertex_map.min() < 0 or vertex_map.max() >= n_t:
+        raise ValueError(f"vertex_map must be ({len(template_colors)},) ids in [0, {n_t}), got shape "
+                         f"{vertex_map.shape}")
+    sums = np.zeros((n_t, 3))
+    np.add.at(sums, vertex_map, template_colors)
+    counts = np.bincount(vertex_map, minlength=n_t)
+    hit = np.nonzero(counts)[0]
+    out = np.empty((n_t, 3))
+    out[hit] = sums[hit] / counts[hit, None]
+    miss = np.nonzero(counts == 0)[0]
+    if len(miss):
+        out[miss] = out[hit[cKDTree(target_V[hit]).query(target_V[miss])[1]]]
+    return out
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+GREY = np.array([0.78, 0.78, 0.80])
+
+
+def crop_box(images: list[np.ndarray], pad: int = 6) -> tuple[slice, slice]:
+    """(rows, columns) slices of the smallest box holding every non-white pixel of the (S,S,3) images, padded."""
+    ink = np.zeros(images[0].shape[:2], bool)
+    for im in images:
+        ink |= (im < 0.999).any(axis=2)
+    if not ink.any():
+        return slice(None), slice(None)
+    rows, cols = np.nonzero(ink.any(1))[0], np.nonzero(ink.any(0))[0]
+    S0, S1 = ink.shape
+    return (slice(max(rows[0] - pad, 0), min(rows[-1] + pad + 1, S0)),
+            slice(max(cols[0] - pad, 0), min(cols[-1] + pad + 1, S1)))
+
+
+def _show(ax, image: np.ndarray, box: tuple[slice, slice]) -> None:
+    """Show the ``box`` part of an image with pixel coordinates kept (so projected points still line up)."""
+    r, c = box
+    r0, c0 = r.start or 0, c.start or 0
+    sub = image[r, c]
+    ax.imshow(sub, extent=(c0 - 0.5, c0 + sub.shape[1] - 0.5, r0 + sub.shape[0] - 0.5, r0 - 0.5))
+    ax.set_xticks([])
+    ax.set_yticks([])
+    for s in ax.spines.values():
+        s.set_visible(False)
+
+
+def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, predictions: dict,
+                         names: list[str], title: str, path, views: tuple[int, ...] = (0, 1), n_views: int = 8,
+                         size: int = 300, wrap: int | None = None, legend: bool = True) -> None:
+    """The template and some test poses side by side with the landmarks as numbered dots.
+
+    Args:
+        template: (V, F) of the template; poses: {pose name: (V, F)} in display order (e.g. best .. worst).
+        landmark_vids: {"template": (L,) vertex ids, pose name: (L,) vertex ids} (the landmark files).
+        predictions: {pose name: (L,) predicted landmark index per template landmark}; truth i -> i, so
+            ``pred[i] != i`` is drawn as a red dot with a cross (green dot: right).
+        names: (L,) landmark names (numbered in the legend); title: the figure title.
+        views: the cameras shown (rows).
+        wrap: with one view, at most this many panels per row (the panels wrap onto more rows).
+        legend: list the numbered landmark names on the right.
+    Writes one PNG to ``path``.
+    """
+    plt = _pyplot()
+    panels = []   # (name, row, image, xy, visible, right)
+    for name, (V, F) in [("template", template)] + list(poses.items()):
+        Vn = normalise_for_picture(V)
+        L = len(landmark_vids[name])
+        pred = np.arange(L) if name == "template" else np.asarray(predictions[name], np.int64)
+        vids = np.asarray(landmark_vids[name], np.int64)[pred]
+        for r, view in enumerate(views):
+            image = render_colored(Vn, F, np.tile(GREY, (len(Vn), 1)), view, n_views, size)
+            xy, visible = project_vertices(Vn, F, vids, view, n_views, size)
+            panels.append((name, r, image, xy, visible, pred == np.arange(L)))
+    box = crop_box([p[2] for p in panels])
+    n_panels = len(poses) + 1
+    n_cols = min(wrap, n_panels) if wrap and len(views) == 1 else n_panels
+    n_rows = len(views) if n_cols == n_panels else -(-n_panels // n_cols)
+    place = (lambda k, r: (r, k // len(views))) if n_cols == n_panels else (lambda k, r: divmod(k, n_cols))
+    aspect = (box[1].stop - box[1].start) / (box[0].stop - box[0].start) if box[0].start is not None else 1.0
+    extra = 1.8 if legend else 0.2
+    fig, axes = plt.subplots(n_rows, n_cols, figsize=(2.7 * aspect * n_cols + extra, 2.9 * n_rows), squeeze=False)
+    for ax in axes.ravel():
+        ax.axis("off")
+    for k, (name, r, image, xy, visible, right) in enumerate(panels):
+        ax = axes[place(k, r)]
+        ax.axis("on")
+        _show(ax, image, box)
+        for i in range(len(right)):
+            alpha = 1.0 if visible[i] else 0.4
+            ax.plot(*xy[i], "o", ms=5, mfc="#22aa33" if right[i] else "#dd2222", mec="k", mew=0.5, alpha=alpha)
+            if not right[i]:
+                ax.plot(*xy[i], "x", ms=9, color="#dd2222", mew=1.4, alpha=alpha)
+            ax.annotate(str(i + 1), xy[i], xytext=(3, 2), textcoords="offset points", fontsize=6, alpha=alpha)
+        if r == 0 or n_cols != n_panels:
+            wrong = int((~right).sum())
+            ax.set_title(name if name == "template" else f"{name}: {len(right) - wrong}/{len(right)} right",
+                         fontsize=9, color="k" if wrong == 0 else "#aa0000")
+    if legend:
+        fig.text(0.995, 0.5, "\n".join(f"{i + 1:>2} {n}" for i, n in enumerate(names)), fontsize=6.5,
+                 va="center", ha="right", family="monospace")
+    fig.suptitle(title + "\ngreen: right, red x: wrong; faint: hidden from this side", fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1 - (extra - 0.1) / fig.get_figwidth(), 0.93))
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def plot_dense_panels(template: tuple, poses: dict, vertex_maps: dict, captions: dict, title: str, path,
+                      views: tuple[int, ...] = (0, 1), n_views: int = 8, size: int = 300) -> None:
+    """The template coloured by its coordinates as RGB, and each pose coloured by that function pulled back
+    through a dense map (same colour = corresponding point; a right map gives the template's pattern).
+
+    Args:
+        template: (V, F); poses: {pose name: (V, F)} in display order.
+        vertex_maps: {pose name: (n_template,) target vertex of each template vertex}.
+        captions: {pose name: text under the pose's title} (e.g. its mean error).
+    Writes one PNG to ``path``.
+    """
+    plt = _pyplot()
+    Vt, Ft = template
+    colors = coordinate_colors(normalise_for_picture(Vt))
+    columns = [("template", Vt, Ft, colors)] + [(n, V, F, pull_back_colors(colors, vertex_maps[n], V))
+                                                for n, (V, F) in poses.items()]
+    panels = [(name, r, render_colored(normalise_for_picture(V), F, col, view, n_views, size))
+              for name, V, F, col in columns for r, view in enumerate(views)]
+    box = crop_box([p[2] for p in panels])
+    aspect = (box[1].stop - box[1].start) / (box[0].stop - box[0].start) if box[0].start is not None else 1.0
+    fig, axes = plt.subplots(len(views), len(columns), figsize=(2.7 * aspect * len(columns) + 0.4,
+                                                                2.9 * len(views)), squeeze=False)
+    for k, (name, r, image) in enumerate(panels):
+        ax = axes[r, k // len(views)]
+        _show(ax, image, box)
+        if r == 0:
+            ax.set_title(name + (f"\n{captions[name]}" if name in captions else ""), fontsize=8)
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1, 0.93))
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def plot_azimuths(true_deg: np.ndarray, recovered_deg: np.ndarray, names: list[str], step_deg: float,
+                  path) -> None:
+    """Recovered (after the best global offset) against true azimuth, degrees, one dot per shape (n,);
+    shapes off the diagonal by more than half a view step are red and named."""
+    plt = _pyplot()
+    true_deg, recovered_deg = np.asarray(true_deg, float), np.asarray(recovered_deg, float)
+    diff = (recovered_deg - true_deg + 180.0) % 360.0 - 180.0
+    wrong = np.abs(diff) > step_deg / 2
+    fig, ax = plt.subplots(figsize=(4.6, 4.2))
+    ax.plot([0, 360], [0, 360], color="#999", lw=1, zorder=0)
+    ax.scatter(true_deg[~wrong], recovered_deg[~wrong], s=22, color="#22aa33", label="exact", zorder=2)
+    ax.scatter(true_deg[wrong], recovered_deg[wrong], s=30, color="#dd2222", marker="x", label="off", zorder=3)
+    for x, y, n in zip(true_deg[wrong], recovered_deg[wrong], np.asarray(names)[wrong]):
+        ax.annotate(n, (x, y), xytext=(3, 3), textcoords="offset points", fontsize=7, color="#aa0000")
+    ax.set_xlim(-10, 370)
+    ax.set_ylim(-10, 370)
+    ax.set_xticks(range(0, 361, 90))
+    ax.set_yticks(range(0, 361, 90))
+    ax.set_xlabel("true azimuth (deg)")
+    ax.set_ylabel("recovered azimuth (deg, best global offset)")
+    ax.set_title(f"recovered vs true azimuth: {int((~wrong).sum())}/{len(wrong)} exact", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

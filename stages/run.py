@@ -1,0 +1,153 @@
+"""``run``: compute a pipeline's cache misses, publish its files, record the run.
+
+Usable from Python::
+
+    from stages.run import run
+    summary = run("pipeline.yaml", overrides=["mrf.sigma=0.5"], workers=2)
+"""
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+import warnings
+
+from .errors import CorruptEntry, UserError
+from .execute import clean_tmp, execute
+from .generated import write_generated
+from .plan import Plan, build_plan, plan_pipeline
+from .publish import publish, verify_published
+from .record import build_record, load_record, save_record
+from .results import metrics
+from .session import client_session, given_client, stderr_log
+from .status import dry_run, format_dry_run
+from .store import atomic_write_text
+from .worker import TaskResult, TaskStatus
+
+
+class RunFailed(Exception):
+    """Some tasks failed (everything else finished and is stored); ``summary`` says which."""
+
+    def __init__(self, summary: dict):
+        self.summary = summary
+        super().__init__(f"{len(summary['failures'])} task(s) failed")
+
+
+def stage_summary(plan: Plan, outcome_results: dict[str, TaskResult], missing_keys: set[str]) -> dict:
+    """Per stage: tasks, executed, cached, failed, skipped and summed compute seconds of this run."""
+    out = {}
+    for name, sp in plan.stages.items():
+        ex = [outcome_results[t.key] for t in sp.tasks if t.key in outcome_results]
+        count = lambda status: sum(r.status is status for r in ex)  # noqa: E731
+        out[name] = {
+            "tasks": len(sp.tasks),
+            "executed": count(TaskStatus.OK),
+            "cached": sum(t.key not in missing_keys or (t.key in outcome_results and
+                                                        outcome_results[t.key].status is TaskStatus.CACHED)
+                          for t in sp.tasks),
+            "failed": count(TaskStatus.FAILED),
+            "skipped": count(TaskStatus.SKIPPED),
+            "seconds": round(sum(r.seconds for r in ex), 4),
+        }
+        if sp.skipped is not None:  # the stage has no tasks: an input it needs is absent
+            out[name]["skipped_stage"] = sp.skipped
+    return out
+
+
+def prepare(plan: Plan, log) -> Plan:
+    """Make a plan executable: write the generated datasets it waits for (then plan again, so their stages
+    get tasks) and save the planner's caches. Only ``run`` and ``sweep`` call this; planning alone writes
+    nothing."""
+    plan.store.claim()
+    if not plan.store.writable():
+        raise UserError(f"cannot write the cache folder {plan.store.root} (read-only, or no permission)",
+                        fix="run with --cache on a writable folder; `status`, `results`, `report` and "
+                            "`run --dry-run` work on a read-only cache")
+    if plan.pending_generated:
+        write_generated(plan.pipeline, plan.store, sorted(plan.pending_generated), log)
+        plan = build_plan(plan.pipeline, log=log)
+    plan.save_caches()
+    return plan
+
+
+def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None, dry: bool = False,
+        cache_dir: str | None = None, output_dir: str | None = None, quiet: bool = False,
+        summary_json: str | None = None, client_getter=None, max_repairs: int = 2) -> dict:
+    """Run a pipeline: compute the cache misses, publish outputs, record the run.
+
+    Returns the summary dict (per stage: tasks, executed, cached, failed, skipped, seconds).
+    Raises RunFailed when a task failed (after everything else finished and was stored).
+    """
+    log = stderr_log(quiet)
+    t0 = time.time()
+    plan = plan_pipeline(path, overrides, cache_dir, output_dir, quiet)
+    if dry:
+        rows = dry_run(plan)
+        print(format_dry_run(plan, rows))
+        return {"dry_run": rows}
+    clean_tmp(plan.store)
+    plan = prepare(plan, log)
+    record_before = load_record(plan)
+    results: dict[str, TaskResult] = {}
+    missing_all: set[str] = set()
+    with (client_session(workers, scheduler, plan.store.root, log) if client_getter is None
+          else given_client(client_getter)) as get_client:
+        verified: dict[str, dict[str, str]] = {}
+        for attempt in range(max_repairs + 1):
+            missing = plan.missing()
+            missing_all |= {t.key for t in missing}
+            corrupt: list[tuple[str, str]] = []  # (key, what is wrong)
+            if missing:
+                if attempt == 0:
+                    reasons: dict[str, int] = {}
+                    for t in missing:
+                        reasons[t.stage] = reasons.get(t.stage, 0) + 1
+                    log(f"running {len(missing)} task(s): " + ", ".join(f"{s} {n}" for s, n in reasons.items()))
+                outcome = execute(missing, plan.store, get_client(), quiet=quiet,
+                                  key_suffix=f"-repair{attempt}" if attempt else "")
+                results.update(outcome.results)
+                corrupt = [(r.corrupt_key, r.error) for r in outcome.corrupt()]
+            if not corrupt:  # the files to publish are checked before publishing: a bad one is recomputed now
+                verified, bad = verify_published(plan)
+                corrupt = [(exc.key, str(exc)) for exc in bad]
+            if not corrupt:
+                break
+            for key, error in corrupt:
+                warnings.warn(f"{error}; recomputing it", stacklevel=1)
+                log(f"warning: {error}; recomputing it")
+                plan.store.invalidate(key)
+            plan = build_plan(plan.pipeline, log=log)
+    try:
+        published = publish(plan, log, verified)
+    except CorruptEntry as exc:  # changed while this run was publishing
+        plan.store.invalidate(exc.key)
+        log(f"warning: {exc}; run again to recompute it")
+        published = []
+    summary = {"pipeline": plan.pipeline.file, "stages": stage_summary(plan, results, missing_all),
+               "failures": [{"stage": r.stage, "item": r.label, "error": r.error, "traceback": r.traceback}
+                            for r in results.values() if r.status is TaskStatus.FAILED],
+               "skipped": [r.display for r in results.values() if r.status is TaskStatus.SKIPPED],
+               "wall_seconds": round(time.time() - t0, 3), "published": len(published)}
+    record = build_record(plan, summary)
+    if record_before and not any(s["executed"] for s in summary["stages"].values()):
+        record["summary"] = record_before.get("summary", summary) | {"last_noop": summary["wall_seconds"]}
+    save_record(plan, record)
+    m = metrics(plan)  # also when items failed: the metrics then list the items they left out (_left_out)
+    if m:
+        try:
+            atomic_write_text(os.path.join(plan.pipeline.output_dir, "metrics.json"),
+                              json.dumps(m, indent=2, default=str))
+        except OSError as exc:
+            raise UserError(f"cannot write {os.path.join(plan.pipeline.output_dir, 'metrics.json')}: "
+                            f"{exc.strerror or exc}", fix="make the output folder writable or use --out FOLDER") from None
+    if summary_json:
+        os.makedirs(os.path.dirname(os.path.abspath(summary_json)), exist_ok=True)
+        atomic_write_text(summary_json, json.dumps(summary, indent=2))
+    for f in summary["failures"]:  # printed even with --quiet: which item failed, and why
+        print(f"FAILED {f['stage']}[{f['item']}]: {f['error']}", file=sys.stderr, flush=True)
+    if summary["skipped"]:
+        log(f"skipped {len(summary['skipped'])} task(s) whose inputs failed")
+    if summary["failures"]:
+        raise RunFailed(summary)
+    return summary

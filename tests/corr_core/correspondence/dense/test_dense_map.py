@@ -1,0 +1,131 @@
+"""End-to-end dense maps on a small generated humanoid: a posed copy, a rigidly moved copy, the mirror image, a
+remeshed pose, determinism.
+
+The humanoid is exactly left/right symmetric, so only orientation can tell left from right. Its torso is also
+nearly front/back symmetric, which makes the 180-degree turn (left<->right *and* front<->back, orientation
+preserving) almost an isometry; a belly bump (``_with_belly``, symmetric in x) makes the front recognisable, as
+on a real body."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from corr_core.correspondence.dense import dense_map, measures, mesh_basis, transfer_landmarks
+from corr_core.generate import humanoid
+
+K, K_INIT = 30, 20
+FAST = {"extrinsic": {"n_patches": 120, "rounds": 4}}
+
+
+def _with_belly(V, F, height: float = 0.06):
+    """Push the front of the torso out along the normals (a bump centred at x = 0; keeps left/right symmetry)."""
+    from corr_core.geometry.primitives import vertex_normals
+
+    centre = np.array([0.0, 1.15, 0.09])
+    bump = height * np.exp(-np.sum((V - centre) ** 2, axis=1) / (2 * 0.08**2))
+    return V + bump[:, None] * vertex_normals(V, F)
+
+
+def _basis(V, F):
+    return mesh_basis(V, F, k=K, n_samples=400)
+
+
+@pytest.fixture(scope="module")
+def body():
+    V, F = humanoid.make_humanoid_rest(grid_step=0.045)
+    V = _with_belly(V, F)
+    W, _ = humanoid.skinning_weights(V, F)
+    pose = humanoid.random_pose(np.random.default_rng(3))
+    Vp = humanoid.pose_mesh(V, W, pose)
+    lms = humanoid.landmark_vertices(V)
+    return {"V": V, "F": F, "W": W, "pose": pose, "Vp": Vp, "S": _basis(V, F), "T": _basis(Vp, F),
+            "landmarks": np.array([lms[n] for n in humanoid.LANDMARK_NAMES]),
+            "sparse": np.array([lms[n] for n in humanoid.SPARSE_LANDMARK_NAMES])}
+
+
+def _run(body, V_t, F_t, B_t, sparse_target=None, **kw):
+    lm = {} if sparse_target is None else {"landmarks_template": body["sparse"], "landmarks_target": sparse_target}
+    return dense_map(body["V"], body["F"], V_t, F_t, basis_template=body["S"], basis_target=B_t, k=K,
+                     k_init=K_INIT, refine_options=FAST, **lm, **kw)
+
+
+def _mean_error(V_t, F_t, p2p, truth):
+    return float(measures.dense_errors(V_t, F_t, {"m": p2p}, truth)["m"].mean())
+
+
+def _sides_kept(body, V_t, F_t, p2p, truth) -> bool:
+    """Every transferred "Left X" / "Right X" landmark is nearer its own true landmark than its mirror twin's."""
+    names = list(humanoid.LANDMARK_NAMES)
+    placed = transfer_landmarks(p2p, body["landmarks"])
+    errors, _ = measures.landmark_errors(V_t, F_t, placed, truth[body["landmarks"]])
+    twin_ids = [names.index(n.replace("Left", "Right")) if n.startswith("Left") else
+                names.index(n.replace("Right", "Left")) for n in names if n.startswith(("Left", "Right"))]
+    own_ids = [i for i, n in enumerate(names) if n.startswith(("Left", "Right"))]
+    to_twin, _ = measures.landmark_errors(V_t, F_t, placed[own_ids], truth[body["landmarks"][twin_ids]])
+    return bool(np.all(errors[own_ids] < to_twin))
+
+
+def test_sparse_map_to_a_pose_is_near_identity_and_refinement_helps(body):
+    truth = np.arange(len(body["V"]))
+    refined = _run(body, body["Vp"], body["F"], body["T"], sparse_target=body["sparse"])
+    spectral = _run(body, body["Vp"], body["F"], body["T"], sparse_target=body["sparse"], refine=None)
+    e_ref = _mean_error(body["Vp"], body["F"], refined, truth)
+    e_spec = _mean_error(body["Vp"], body["F"], spectral, truth)
+    assert refined.shape == (len(body["V"]),) and refined.dtype == np.int64
+    assert e_ref < 0.02, e_ref
+    assert e_ref < e_spec
+    assert _sides_kept(body, body["Vp"], body["F"], refined, truth)
+
+
+def test_automatic_map_to_a_rigidly_moved_pose_keeps_left_and_right(body):
+    c, s = np.cos(0.7), np.sin(0.7)
+    R = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    Vm = body["Vp"] @ R.T + np.array([0.3, -0.2, 1.0])
+    p2p = _run(body, Vm, body["F"], _basis(Vm, body["F"]))
+    truth = np.arange(len(body["V"]))
+    assert _mean_error(Vm, body["F"], p2p, truth) < 0.03
+    assert _sides_kept(body, Vm, body["F"], p2p, truth)          # a left/right flip fails this
+
+
+def test_automatic_map_to_the_mirror_image_is_orientation_preserving(body):
+    """The mirror image (x -> -x, faces reversed) of a pose is another pose of the same symmetric body; the
+    orientation-preserving truth sends vertex i to its mirror partner, the identity would reverse orientation."""
+    Vm, Fm = body["Vp"] * np.array([-1.0, 1.0, 1.0]), body["F"][:, ::-1].copy()
+    partner = humanoid.mirror_pairs(body["V"])
+    assert partner is not None
+    p2p = _run(body, Vm, Fm, _basis(Vm, Fm))
+    assert _mean_error(Vm, Fm, p2p, partner) < 0.03
+    assert _mean_error(Vm, Fm, p2p, np.arange(len(body["V"]))) > 0.2
+
+
+def test_different_connectivity_end_to_end(body):
+    """Target: the same body meshed on a finer grid and posed alike; truth: nearest vertex at rest."""
+    V2, F2 = humanoid.make_humanoid_rest(grid_step=0.04)
+    V2 = _with_belly(V2, F2)
+    W2, _ = humanoid.skinning_weights(V2, F2)
+    Vp2 = humanoid.pose_mesh(V2, W2, body["pose"])
+    assert len(V2) != len(body["V"])
+    truth = cKDTree(V2).query(body["V"])[1]
+    B2 = _basis(Vp2, F2)
+    for sparse_target in (truth[body["sparse"]], None):
+        p2p = _run(body, Vp2, F2, B2, sparse_target=sparse_target)
+        assert p2p.min() >= 0 and p2p.max() < len(V2)
+        assert _mean_error(Vp2, F2, p2p, truth) < 0.04
+        assert _sides_kept(body, Vp2, F2, p2p, truth)
+
+
+def test_two_calls_give_identical_maps(body):
+    runs = [dense_map(body["V"], body["F"], body["Vp"], body["F"], k=K, k_init=K_INIT, refine_options=FAST)
+            for _ in range(2)]
+    assert np.array_equal(runs[0], runs[1])
+
+
+def test_bad_input_is_named(body):
+    with pytest.raises(ValueError, match="both meshes"):
+        dense_map(body["V"], body["F"], body["Vp"], body["F"], landmarks_template=body["sparse"],
+                  basis_template=body["S"], basis_target=body["T"])
+    with pytest.raises(ValueError, match="refine"):
+        _run(body, body["Vp"], body["F"], body["T"], sparse_target=body["sparse"], refine="smooth")
+    with pytest.raises(ValueError, match="target: F must be"):
+        dense_map(body["V"], body["F"], body["Vp"], body["F"][:, :2], k=K)

@@ -1,0 +1,53 @@
+"""Landmark files: named and bare ids, 1-based detection, errors naming file and line; subset positions."""
+import warnings
+
+import numpy as np
+import pytest
+
+from corr_core.correspondence.landmarks import read_landmarks, subset_positions
+
+
+def test_read_landmarks_named_and_bare(tmp_path):
+    p = tmp_path / "lm.txt"
+    p.write_text("361,Left Toe\n368,Right Toe\n12464,Vertex")  # no trailing newline
+    ids, names = read_landmarks(p, 12498)
+    np.testing.assert_array_equal(ids, [361, 368, 12464])
+    assert names == ["Left Toe", "Right Toe", "Vertex"]
+    q = tmp_path / "bare.txt"
+    q.write_text("5\n0\n9\n")
+    ids, names = read_landmarks(q, 10)
+    np.testing.assert_array_equal(ids, [5, 0, 9])
+    assert names == ["5", "0", "9"]
+
+
+def test_read_landmarks_detects_one_based(tmp_path):
+    p = tmp_path / "one_based.txt"
+    p.write_text("10\n3\n1\n")
+    with pytest.warns(UserWarning, match="1-based"):
+        ids, _ = read_landmarks(p, 10)
+    np.testing.assert_array_equal(ids, [9, 2, 0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ids, _ = read_landmarks(p)  # no vertex count: ids taken as they are
+    np.testing.assert_array_equal(ids, [10, 3, 1])
+
+
+def test_read_landmarks_errors_name_file_and_line(tmp_path):
+    p = tmp_path / "bad.txt"
+    p.write_text("1,A\n0,B\n12,C\n")
+    with pytest.raises(ValueError, match=r"bad.txt:3: vertex id 12 is out of range"):
+        read_landmarks(p, 10)
+    q = tmp_path / "mixed.txt"
+    q.write_text("0\n10\n")
+    with pytest.raises(ValueError, match=r"mixed.txt:2"):
+        read_landmarks(q, 10)
+    r = tmp_path / "junk.txt"
+    r.write_text("3\nhello\n")
+    with pytest.raises(ValueError, match=r"junk.txt:2"):
+        read_landmarks(r)
+
+
+def test_subset_positions_and_missing_ids_named():
+    np.testing.assert_array_equal(subset_positions(np.array([7, 3, 9, 1]), np.array([9, 7])), [2, 0])
+    with pytest.raises(ValueError, match=r"sparse.txt: sparse landmark vertices \[5\] are not in all.txt"):
+        subset_positions(np.array([7, 3]), np.array([3, 5]), "sparse.txt", "all.txt")

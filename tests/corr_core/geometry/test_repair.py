@@ -1,0 +1,166 @@
+"""Repair on load: duplicated / degenerate / zero-area faces go, orientation is made consistent, unreferenced
+vertices are ignored, vertex ids never change, every repair is reported naming the file."""
+import warnings
+
+import numpy as np
+import pytest
+
+from corr_core.generate.chairs import canonical_chair
+from corr_core.geometry.mesh_io import MeshError, save_obj
+from corr_core.geometry.repair import load_repaired_mesh, orient_faces, repair_mesh
+from tests.helpers import sphere
+
+TET_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+TET_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+
+
+def _kinds(records):
+    return {r["kind"]: r for r in records}
+
+
+def _published_scan(V, F, flips=(0, 5, 9)):
+    """The published-scan defects: one face duplicated in both orientations, 10 unreferenced far vertices and
+    one at 1e30, a few faces flipped. Returns (V2, F2); vertex ids 0..n-1 are those of V."""
+    F2 = F.copy()
+    F2[list(flips)] = F2[list(flips)][:, ::-1]
+    F2 = np.vstack([F2, F[7], F[7][::-1]])
+    V2 = np.vstack([V, np.full((10, 3), 40.0) + np.arange(10)[:, None], [[1e30, 0.0, 0.0]]])
+    return V2, F2
+
+
+def test_clean_mesh_needs_no_repair():
+    V, F = sphere(300)
+    F2, records = repair_mesh(V, F, "ball.obj")
+    np.testing.assert_array_equal(F2, F)
+    assert records == []
+
+
+def test_published_scan_repairs_are_reported_and_keep_vertex_ids():
+    V, F = sphere(400)
+    V2, F2 = _published_scan(V, F)
+    repaired, records = repair_mesh(V2, F2, "scan.obj")
+    np.testing.assert_array_equal(repaired, F)  # the original faces, original orientation, original ids
+    kinds = _kinds(records)
+    assert kinds["duplicate_faces"]["count"] == 2 and "1 opposite orientation" in kinds["duplicate_faces"]["message"]
+    assert kinds["reoriented_faces"]["count"] == 3
+    assert kinds["unreferenced_vertices"]["count"] == 11
+    assert all(r["message"].startswith("scan.obj: ") and r["file"] == "scan.obj" for r in records)
+
+
+def test_published_chair_loads_renders_at_normal_size_and_reports(tmp_path):
+    from shapecorr.alignment import views
+
+    V, F = canonical_chair(0, 1)
+    F, _ = repair_mesh(V, F, "chair")  # the generated chair's faces are not consistently oriented
+    save_obj(tmp_path / "clean.obj", V, F)
+    V2, F2 = _published_scan(V, F)
+    save_obj(tmp_path / "scan.obj", V2, F2)
+    clean = views(str(tmp_path / "clean.obj"), n_views=4, image_size=64)
+    with pytest.warns(UserWarning, match=r"scan\.obj: dropped 2 duplicate face"):
+        scan = views(str(tmp_path / "scan.obj"), n_views=4, image_size=64)
+    object_fraction = lambda out: float(np.mean(out["views"] < 255))  # noqa: E731
+    assert object_fraction(clean) > 0.05
+    assert object_fraction(scan) == pytest.approx(object_fraction(clean), rel=0.02)
+    assert np.mean(np.abs(scan["views"].astype(float) - clean["views"])) < 1.0
+    kinds = _kinds(scan["repairs"])
+    assert {"duplicate_faces", "reoriented_faces", "unreferenced_vertices"} <= set(kinds)
+    assert str(tmp_path / "scan.obj") in kinds["duplicate_faces"]["message"]
+    assert clean["repairs"] == [] or all(r["level"] == "note" for r in clean["repairs"])
+
+
+def test_duplicated_face_pair_no_longer_rejects_a_correspondence_mesh(tmp_path):
+    """Was: '2 non-manifold edge(s) shared by more than two faces' and the mesh was rejected."""
+    from shapecorr.correspondence import mesh
+
+    V, F = sphere(300)
+    save_obj(tmp_path / "mesh001.obj", V, np.vstack([F, F[3], F[3][::-1]]))
+    with pytest.warns(UserWarning, match=r"mesh001\.obj: dropped 2 duplicate face"):
+        out = mesh(str(tmp_path / "mesh001.obj"))
+    np.testing.assert_array_equal(out["F"], F)
+    assert [r["kind"] for r in out["repairs"]] == ["duplicate_faces"]
+    assert out["area"] == pytest.approx(4 * np.pi, rel=0.02)
+
+
+def test_degenerate_and_zero_area_faces_are_dropped():
+    V = np.vstack([TET_V, [[0.5, 0.5, 0.0]]])  # vertex 4 lies on the edge (1, 2): face (1, 2, 4) has no area
+    F = np.vstack([TET_F, [[0, 0, 1]], [[1, 2, 4]]])
+    F2, records = repair_mesh(V, F, "flat.obj")
+    np.testing.assert_array_equal(F2, TET_F)
+    kinds = _kinds(records)
+    assert kinds["degenerate_faces"]["count"] == 1 and "face 4" in kinds["degenerate_faces"]["message"]
+    assert kinds["zero_area_faces"]["count"] == 1 and "face 5" in kinds["zero_area_faces"]["message"]
+
+
+def test_orientation_keeps_the_majority_and_flips_the_rest():
+    V, F = sphere(500)
+    rng = np.random.default_rng(1)
+    flipped = rng.choice(len(F), size=len(F) // 3, replace=False)
+    bad = F.copy()
+    bad[flipped] = bad[flipped][:, ::-1]
+    fixed, n_flipped, n_inconsistent = orient_faces(bad)
+    assert n_flipped == len(flipped) and n_inconsistent == 0
+    normals = np.cross(V[fixed[:, 1]] - V[fixed[:, 0]], V[fixed[:, 2]] - V[fixed[:, 0]])
+    assert np.all(np.einsum("ij,ij->i", normals, V[fixed].mean(1)) > 0)  # all outward again
+    np.testing.assert_array_equal(np.sort(fixed, axis=1), np.sort(F, axis=1))  # same triangles, same rows
+
+
+def test_orientation_is_per_component():
+    _, F = sphere(200)
+    n = int(F.max()) + 1
+    F2 = np.vstack([F, F[:, ::-1] + n])  # a second ball, consistently inward: a patch of its own, kept as is
+    F2[[0, len(F) + 1]] = F2[[0, len(F) + 1]][:, ::-1]  # one stray flip in each ball
+    fixed, n_flipped, _ = orient_faces(F2)
+    assert n_flipped == 2
+    np.testing.assert_array_equal(fixed, np.vstack([F, F[:, ::-1] + n]))
+
+
+def test_keep_largest_component_keeps_vertex_ids():
+    V, F = sphere(300)
+    small = TET_V * 0.1 + [3.0, 0, 0]
+    V2 = np.vstack([V, small])
+    F2 = np.vstack([F, TET_F + len(V)])
+    kept, records = repair_mesh(V2, F2, "two.obj", keep_largest_component=True)
+    np.testing.assert_array_equal(kept, F)
+    kinds = _kinds(records)
+    assert kinds["components"]["action"] == "dropped" and kinds["unreferenced_vertices"]["count"] == 4
+    _, records = repair_mesh(V2, F2, "two.obj")
+    assert _kinds(records)["components"]["level"] == "note"
+
+
+def test_boundary_loops_are_reported():
+    V, F = sphere(400)
+    ring = np.flatnonzero(V[F].mean(1)[:, 2] > 0.9)  # cut a cap: one hole
+    _, records = repair_mesh(V, np.delete(F, ring, axis=0), "open.obj")
+    boundary = _kinds(records)["boundary"]
+    assert boundary["count"] == 1 and boundary["level"] == "note"
+
+
+def test_non_manifold_fin_is_reported_not_rejected():
+    V = np.vstack([TET_V, [[0, -1, 0.5]]])
+    F = np.vstack([TET_F, [[0, 1, 4]]])
+    F2, records = repair_mesh(V, F, "fin.obj")
+    assert len(F2) == 5
+    assert _kinds(records)["non_manifold_edges"]["level"] == "warning"
+
+
+@pytest.mark.parametrize("V, F, message", [
+    (np.vstack([TET_V, [[np.nan, 0, 0]]]), np.vstack([TET_F, [[0, 1, 4]]]), "NaN or infinite"),
+    (TET_V, np.array([[0, 0, 1], [1, 2, 2]]), "no valid face left"),
+    (np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0.0]]), np.array([[0, 1, 2]]), "no valid face left"),
+    (TET_V, np.zeros((0, 3), dtype=int), "no faces"),
+])
+def test_unusable_meshes_raise_naming_the_file(V, F, message):
+    with pytest.raises(MeshError, match=message) as info:
+        repair_mesh(V, F, "bad.obj")
+    assert "bad.obj" in str(info.value)
+
+
+def test_load_repaired_mesh_reads_and_repairs(tmp_path):
+    V, F = sphere(200)
+    save_obj(tmp_path / "m.obj", V, np.vstack([F, F[0]]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # loading itself does not warn: the caller decides
+        V2, F2, records = load_repaired_mesh(tmp_path / "m.obj")
+    assert len(V2) == len(V)
+    np.testing.assert_array_equal(F2, F)
+    assert records[0]["kind"] == "duplicate_faces" and str(tmp_path / "m.obj") in records[0]["message"]

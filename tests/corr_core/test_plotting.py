@@ -1,0 +1,41 @@
+"""corr_core.plotting: every figure function writes a non-trivial image from small arrays."""
+import numpy as np
+import pytest
+
+from corr_core import plotting
+from corr_core.correspondence.measures import correspondence_matrix, frequency_matrix
+
+
+def test_correspondence_plots_are_written(tmp_path):
+    F = frequency_matrix([correspondence_matrix(np.array([0, 2, 1]), 3), correspondence_matrix(np.arange(3), 3)])
+    names = ["Left Toe", "Right Toe", "Vertex"]
+    plotting.plot_frequency_matrix(F, names, names, "test", tmp_path / "f.png")
+    thr = np.linspace(0, 0.25, 51)
+    plotting.plot_error_curves({"a": (thr, np.linspace(0, 1, 51)), "b": (thr, np.linspace(0.5, 1, 51))},
+                               tmp_path / "c.png")
+    plotting.plot_accuracy_bars({"descriptor": 0.5, "mrf": 0.75}, tmp_path / "a.png")
+    for name in ("f.png", "c.png", "a.png"):
+        assert (tmp_path / name).stat().st_size > 1000
+
+
+@pytest.fixture
+def collection():
+    rng = np.random.default_rng(0)
+    names = [f"{i:03d}" for i in range(12)]
+    views = {n: rng.integers(0, 256, size=(8, 30, 30), dtype=np.uint8) for n in names}
+    features = {n: rng.random((8, 15 * 15 * 36)).astype(np.float32) for n in names}  # Dollar HoG layout
+    return names, views, features
+
+
+def test_alignment_plots_are_written(tmp_path, collection):
+    names, views, features = collection
+    labels = {n: i % 8 for i, n in enumerate(names)}
+    plotting.plot_hog_drawings(views, features, names[:3], [0, 4], tmp_path / "hog.png")
+    plotting.plot_pair_cost_heatmap(np.arange(8.0), "000", "001", tmp_path / "dij.png")
+    plotting.plot_view_pairs(views["000"], views["001"], features["000"], features["001"], "000", "001",
+                             tmp_path / "pairs.png")
+    plotting.plot_aligned_grid(views, labels, names[:9], tmp_path / "grid.png")
+    plotting.plot_contact_sheet(views, names, np.array([labels[n] for n in names]), tmp_path / "sheet.png",
+                                columns=5)
+    for name in ("hog.png", "dij.png", "pairs.png", "grid.png", "sheet.png"):
+        assert (tmp_path / name).stat().st_size > 1000

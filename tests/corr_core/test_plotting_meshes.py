@@ -1,0 +1,83 @@
+"""Mesh pictures with the project's ray caster: colours land where the vertices are, hidden points are told
+apart, a dense map pulls colours back, and the figure stages write their files."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from corr_core import plotting_meshes as pm
+
+
+def box_mesh():
+    """A unit cube (8 vertices, 12 outward triangles) centred at the origin, scaled to radius 1."""
+    V = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float) / np.sqrt(3)
+    F = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    return V, F
+
+
+def test_render_colored_puts_vertex_colours_on_the_visible_side():
+    V, F = box_mesh()
+    front = V[:, 2] > 0                          # view 0 looks from +z
+    colors = np.where(front[:, None], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])
+    image = pm.render_colored(V, F, colors, view=0, n_views=8, size=64, elevation_deg=0.0)
+    assert image.shape == (64, 64, 3)
+    centre = image[32, 32]
+    assert centre[0] > 0.5 and centre[2] < 0.05        # the red front face, not the blue back
+    assert np.allclose(image[0, 0], 1.0)               # white background
+    back = pm.render_colored(V, F, colors, view=4, n_views=8, size=64, elevation_deg=0.0)   # from -z
+    assert back[32, 32, 2] > 0.5 and back[32, 32, 0] < 0.05
+    with pytest.raises(ValueError, match="colors must be"):
+        pm.render_colored(V, F, colors[:3])
+
+
+def test_project_vertices_positions_and_visibility():
+    V, F = box_mesh()
+    xy, visible = pm.project_vertices(V, F, np.arange(8), view=0, n_views=8, size=100, elevation_deg=0.0)
+    assert visible.tolist() == (V[:, 2] > 0).tolist()  # front corners visible, back ones hidden
+    s = 1 / np.sqrt(3) / pm.MARGIN
+    right_top = np.nonzero((V[:, 0] > 0) & (V[:, 1] > 0) & (V[:, 2] > 0))[0][0]
+    assert np.allclose(xy[right_top], [(1 + s) * 50, (1 - s) * 50])   # +x right, +y up (row 0 at the top)
+
+
+def test_pull_back_colors_identity_and_fill():
+    V = np.random.default_rng(0).normal(size=(30, 3))
+    colors = pm.coordinate_colors(V)
+    assert colors.min() >= 0 and colors.max() <= 1
+    assert np.allclose(pm.pull_back_colors(colors, np.arange(30), V), colors)
+    # everything mapped onto vertex 0: vertex 0 gets the mean colour, the others fill from it
+    out = pm.pull_back_colors(colors, np.zeros(30, int), V)
+    assert np.allclose(out, colors.mean(0))
+    with pytest.raises(ValueError, match="vertex_map"):
+        pm.pull_back_colors(colors, np.full(30, 30), V)
+
+
+def test_figure_stages_write_pictures(tmp_path):
+    from shapecorr import figures
+    V, F = box_mesh()
+    mesh = {"V": V, "F": F, "area": 1.0}
+    lm = tmp_path / "landmarks.txt"
+    lm.write_text("0,a\n7,b\n3,c\n")
+    preds = {"p1": {"all": np.array([0, 1, 2])}, "p2": {"all": np.array([1, 0, 2])},
+             "p3": {"all": np.array([0, 1, 2]), "no_truth": "different vertex count"}}
+    out = figures.landmark_figures(mesh, {"t": mesh, "p1": mesh, "p2": mesh, "p3": mesh}, str(lm), mrf=preds,
+                                   out_dir=str(tmp_path))
+    assert out["figures"] == ["landmarks_worst_per_method.png", "landmarks_mrf.png"]
+    assert out["poses"] == {"mrf": ["p1", "p2"]}        # best first, worst last; no truth: left out
+    assert all((tmp_path / f).stat().st_size > 1000 for f in out["figures"])
+    dense = figures.dense_figures(mesh, {"p1": mesh, "p2": mesh},
+                                  mobius={"p1": {"vertex_map": np.arange(8)}, "p2": np.roll(np.arange(8), 1)},
+                                  out_dir=str(tmp_path))
+    assert dense["figures"] == ["dense_mobius.png"] and dense["mean_error"]["mobius"]["p1"] == 0.0
+    assert dense["mean_error"]["mobius"]["p2"] > 0
+
+
+def test_azimuth_figure(tmp_path):
+    from shapecorr import figures
+    gt = tmp_path / "gt.csv"
+    gt.write_text("shape,azimuth_steps,azimuth_deg\na,0,0\nb,4,90\nc,8,180\nd,1,22.5\n")
+    solution = {"names": ["a", "b", "c", "d"], "labels": np.array([3, 7, 11, 9]), "n_views": 16}
+    out = figures.azimuth_figure(solution, str(gt), out_dir=str(tmp_path))
+    assert out["figures"] == ["azimuth_recovered_vs_true.png"] and out["exact"] == 0.75   # d is off
+    assert (tmp_path / "azimuth_recovered_vs_true.png").stat().st_size > 1000
+    assert figures.azimuth_figure(solution, None, out_dir=str(tmp_path)) == {"figures": []}

@@ -1,0 +1,97 @@
+"""Synthetic stage functions for engine tests and benchmarks (no geometry involved): a test-only plugin.
+
+Never registered in production: tests and ``bench/engine.py`` load it through the development hook
+``STAGES_PLUGINS=tests.stages.synthetic_plugin`` (see stages/registry.py). They mimic the shape of the alignment pipeline: per-item feature extraction from a text file, per-pair
+comparison of features, and a collection-level reduction whose parameter can be swept.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import time
+
+import numpy as np
+
+from stages.registry import Plugin, register
+
+PLUGIN = Plugin(name="synthetic", packages=(__name__,))
+
+
+def _seed_from_text(text: str) -> int:
+    return int.from_bytes(hashlib.blake2b(text.encode(), digest_size=4).digest(), "little")
+
+
+@register("synthetic.features", fanout="item")
+def features(path, *, dim: int = 64, work: int = 0, fail_on: str = "") -> np.ndarray:
+    """Read a text file and return a (8, dim) float32 feature; ``work`` adds that many ms of compute."""
+    with open(path, encoding="utf-8") as fh:
+        text = fh.read()
+    if fail_on and fail_on in text:
+        raise ValueError(f"{path}: contains the marker '{fail_on}'")
+    rng = np.random.default_rng(_seed_from_text(text))
+    F = rng.standard_normal((8, dim)).astype(np.float32)
+    _spin(work)
+    return F
+
+
+@register("synthetic.scale", fanout="item")
+def scale(features, *, factor: float = 1.0) -> np.ndarray:
+    """Multiply a per-item feature by ``factor``."""
+    return np.asarray(features) * np.float32(factor)
+
+
+def _mirror_distances(block: np.ndarray) -> np.ndarray:
+    return np.swapaxes(block, 0, 1)
+
+
+@register("synthetic.pair_distances", fanout="pair", mirror=_mirror_distances)
+def pair_distances(A, B, *, work_us: int = 0) -> np.ndarray:
+    """(a, b) squared distances between stacks A (a,8,d) and B (b,8,d); ``work_us`` microseconds of compute
+    added per pair."""
+    A2 = A.reshape(len(A), -1)
+    B2 = B.reshape(len(B), -1)
+    D = (A2 ** 2).sum(1)[:, None] + (B2 ** 2).sum(1)[None, :] - 2 * A2 @ B2.T
+    _spin(work_us * len(A) * len(B) / 1000.0)
+    return D.astype(np.float32)
+
+
+@register("synthetic.summarize", fanout="once")
+def summarize(distances, *, sigma: float = 1.0) -> dict:
+    """Collection-level metrics from the (N,N) distance matrix: mean affinity at ``sigma``."""
+    M = np.asarray(distances["matrix"], dtype=np.float64)
+    W = np.exp(-M / (sigma * np.median(M[M > 0]) if np.any(M > 0) else 1.0))
+    return {"n_items": int(len(M)), "mean_affinity": float(W.mean()), "sigma": float(sigma),
+            "names": list(distances["names"])}
+
+
+@register("synthetic.collect", fanout="once")
+def collect(items) -> dict:
+    """Stack a per-item collection into one array with its names."""
+    names = sorted(items)
+    return {"names": names, "stack": np.stack([np.asarray(items[n]) for n in names]) if names else np.zeros(0)}
+
+
+@register("synthetic.report", fanout="once", writes_files=True)
+def report(summary, *, title: str = "synthetic", out_dir: str) -> dict:
+    """Write a small text report file."""
+    with open(os.path.join(out_dir, "summary.txt"), "w", encoding="utf-8") as fh:
+        fh.write(f"{title}: {summary['n_items']} items, mean affinity {summary['mean_affinity']:.6f}\n")
+    return {"files": ["summary.txt"]}
+
+
+@register("synthetic.write_items", kind="generator")
+def write_items(*, n: int = 10, seed: int = 0, out_dir: str) -> None:
+    """Generator: ``n`` text files item000.txt ... with deterministic random content."""
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        with open(os.path.join(out_dir, f"item{i:03d}.txt"), "w", encoding="utf-8") as fh:
+            fh.write(" ".join(map(str, rng.integers(0, 1000, 16))) + "\n")
+
+
+def _spin(ms: float) -> None:
+    if ms <= 0:
+        return
+    end = time.perf_counter() + ms / 1000.0
+    x = np.ones(64)
+    while time.perf_counter() < end:
+        x = np.sqrt(x + 1.0)

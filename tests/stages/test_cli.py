@@ -1,0 +1,168 @@
+"""The CLI end to end: kill -9 and resume, concurrent runs, code changes, an external dask cluster."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from stages import api
+
+from tests.helpers import ROOT, SYNTHETIC_YAML, ExternalCluster, cli, make_project, plugins_env
+
+
+def _summary(path: Path) -> dict:
+    return json.loads(path.read_text())
+
+
+def _executed(s: dict) -> dict:
+    return {k: v["executed"] for k, v in s["stages"].items()}
+
+
+def _final_values(project: Path, cwd: Path, overrides=()) -> dict:
+    os.chdir(cwd)
+    plan = api.plan_pipeline(str(project), list(overrides), quiet=True)
+    out = {}
+    for name, sp in plan.stages.items():
+        for t in sp.tasks:
+            out[(name, t.label)] = plan.store.get(t.key)
+    return out
+
+
+def test_run_dry_run_and_summary_json(tmp_path):
+    project = make_project(tmp_path)
+    res = cli(["run", "p.yaml", "--summary-json", "s.json"], cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert _executed(_summary(tmp_path / "s.json"))["feat"] == 12
+    assert "done in" in res.stdout
+    res = cli(["run", "p.yaml", "--set", "sigma=3", "--dry-run"], cwd=tmp_path)
+    assert res.returncode == 0
+    assert "summary: 1 of 1 task(s) would run" in res.stdout and "param sigma: 1.0 -> 3.0" in res.stdout
+    assert "feat: 0 of 12 task(s) would run (all cached)" in res.stdout
+    res = cli(["status", "p.yaml", "--set", "sigma=3"], cwd=tmp_path)
+    assert "param sigma: 1.0 -> 3.0" in res.stdout
+    res = cli(["results", "p.yaml", "--json"], cwd=tmp_path)
+    assert json.loads(res.stdout)["n_items"] == 12
+    res = cli(["results", "p.yaml", "--set", "sigma=7"], cwd=tmp_path)
+    assert res.returncode == 3 and "not computed yet" in res.stdout
+
+
+def test_kill_9_then_resume_equals_uninterrupted_run(tmp_path):
+    work = "100"  # ms per item: the run takes a few seconds
+    slow = tmp_path / "killed"
+    slow.mkdir()
+    project = make_project(slow, n=40)
+    proc = subprocess.Popen([sys.executable, "-m", "stages", "run", "p.yaml", "--set", f"work={work}", "--quiet"],
+                            cwd=slow, env={**os.environ, "PYTHONPATH": str(ROOT)}, start_new_session=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    manifest = slow / "cache" / "manifest"
+    deadline = time.time() + 120
+    while time.time() < deadline:
+        n = sum(len(f) for _, _, f in os.walk(manifest)) if manifest.exists() else 0
+        if n >= 10:
+            break
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    done_before = sum(len(f) for _, _, f in os.walk(manifest))
+    assert 10 <= done_before < 40 + 55 + 2, "the kill should land mid-run"
+    res = cli(["run", "p.yaml", "--set", f"work={work}", "--summary-json", "s.json"], cwd=slow)
+    assert res.returncode == 0, res.stderr
+    s = _summary(slow / "s.json")
+    assert s["stages"]["feat"]["cached"] >= 1 and s["stages"]["feat"]["executed"] < 40
+    # an uninterrupted run in a fresh folder gives identical results
+    clean = tmp_path / "clean"
+    clean.mkdir()
+    make_project(clean, n=40)
+    assert cli(["run", "p.yaml", "--set", f"work={work}", "--quiet"], cwd=clean).returncode == 0
+    cwd = os.getcwd()
+    try:
+        a = _final_values(project, slow, [f"work={work}"])
+        b = _final_values(clean / "p.yaml", clean, [f"work={work}"])
+    finally:
+        os.chdir(cwd)
+    assert a.keys() == b.keys()
+    for k in a:
+        if isinstance(a[k], np.ndarray):
+            np.testing.assert_array_equal(a[k], b[k])
+        else:
+            assert a[k] == b[k]
+
+
+def test_two_runs_at_once_on_one_cache(tmp_path):
+    make_project(tmp_path, n=30)
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    procs = [subprocess.Popen([sys.executable, "-m", "stages", "run", "p.yaml", "--set", "work=30",
+                               "--summary-json", f"s{i}.json", "--quiet"], cwd=tmp_path, env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in range(2)]
+    outs = [p.communicate(timeout=300) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], outs
+    res = cli(["run", "p.yaml", "--set", "work=30", "--summary-json", "s2.json"], cwd=tmp_path)
+    assert sum(_executed(_summary(tmp_path / "s2.json")).values()) == 0
+    assert json.loads(cli(["results", "p.yaml", "--set", "work=30", "--json"], cwd=tmp_path).stdout)["n_items"] == 30
+
+
+PLUGIN = '''
+import numpy as np
+from stages.registry import register
+
+def helper(x):
+    return x * 2.0
+
+@register("plug.double", fanout="item")
+def double(features):
+    """Double a feature."""
+    return helper(np.asarray(features))
+
+@register("plug.total", fanout="once")
+def total(items):
+    return {"total": float(sum(float(np.sum(v)) for v in items.values()))}
+'''
+
+PLUGIN_YAML = SYNTHETIC_YAML + """  doubled:
+    function: plug.double
+    foreach: feat
+    inputs: {features: feat}
+  total:
+    function: plug.total
+    inputs: {items: doubled}
+    metrics: true
+"""
+
+
+def test_code_change_reruns_only_dependent_stages(tmp_path):
+    make_project(tmp_path, n=8, yaml_text=PLUGIN_YAML)
+    plug = tmp_path / "plugmod"
+    plug.mkdir()
+    (plug / "myplugin.py").write_text(PLUGIN)
+    env = plugins_env("myplugin")
+    env["PYTHONPATH"] += os.pathsep + str(plug)
+    assert cli(["run", "p.yaml", "--quiet"], cwd=tmp_path, env=env).returncode == 0
+    # docstrings and comments do not count as code
+    (plug / "myplugin.py").write_text(PLUGIN.replace('"""Double a feature."""', '"""Twice."""  # comment'))
+    res = cli(["run", "p.yaml", "--summary-json", "a.json", "--quiet"], cwd=tmp_path, env=env)
+    assert sum(_executed(_summary(tmp_path / "a.json")).values()) == 0
+    # a change in a helper the stage function calls reruns that stage and what follows it only
+    (plug / "myplugin.py").write_text(PLUGIN.replace("x * 2.0", "x * 3.0"))
+    res = cli(["run", "p.yaml", "--dry-run"], cwd=tmp_path, env=env)
+    assert "doubled: 8 of 8 task(s) would run" in res.stdout and "code changed: myplugin.helper" in res.stdout
+    res = cli(["run", "p.yaml", "--summary-json", "b.json", "--quiet"], cwd=tmp_path, env=env)
+    assert res.returncode == 0, res.stderr
+    ex = _executed(_summary(tmp_path / "b.json"))
+    assert ex == {"feat": 0, "dist": 0, "summary": 0, "rep": 0, "doubled": 8, "total": 1}
+
+
+def test_pipeline_on_an_external_dask_cluster(tmp_path):
+    make_project(tmp_path, n=10)
+    with ExternalCluster(tmp_path, n_workers=2) as cluster:
+        res = cli(["run", "p.yaml", "--scheduler", cluster.address, "--summary-json", "s.json"], cwd=tmp_path)
+        assert res.returncode == 0, res.stderr
+        assert _executed(_summary(tmp_path / "s.json"))["feat"] == 10
+        manifests = [json.loads(p.read_text()) for p in (tmp_path / "cache" / "manifest").rglob("*.json")]
+        assert len({m["info"]["pid"] for m in manifests}) == 2  # both external workers did work

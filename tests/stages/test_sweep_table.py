@@ -1,0 +1,133 @@
+"""``sweep``'s printed table: headline measures only, at most 120 columns, the best per column starred;
+``--metrics`` picks columns (keys or patterns), ``--csv`` writes the full table; plus the progress estimate."""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import sys
+
+import pytest
+
+from stages import registry
+from stages.errors import PipelineError
+from stages.execute import Progress
+from stages.sweep import MAX_WIDTH, format_table, headline_columns, write_table
+from tests.helpers import SYNTHETIC_YAML, cli, make_project, plugins_env
+
+PLUGIN = "sweep_table_plugin"
+PLUGIN_SOURCE = '''
+from stages.registry import Headline, Measure, Plugin, register
+
+PLUGIN = Plugin(name="sweep_table", packages=(__name__,),
+                headlines=(Headline(group="g", title="per method", rows_from="score",
+                                    measures=(Measure("score", "score.{row}"),
+                                              Measure("error", "error.{row}", better="min"))),))
+
+
+@register("synthetic.sweep_scores", group="g")
+def scores(summary, *, shift: float = 0.0):
+    """Many scalar metrics (as a real evaluation gives): 2 headline methods and 150 per-item values."""
+    a = float(summary["mean_affinity"])
+    return {"score": {"m1": round(a + shift, 6), "m2": 0.5}, "error": {"m1": round(1 - a, 6), "m2": 0.4},
+            "per_item": {f"item{i:03d}": {"value": i * a} for i in range(150)},
+            **{f"count_{i:03d}": i for i in range(150)}}
+'''
+
+EXTRA = """\
+  scores:
+    function: synthetic.sweep_scores
+    inputs: {summary: summary}
+    metrics: true
+"""
+
+
+def _rows(values_m1, errors_m1):
+    return [{"point": {"sigma": str(i)}, "metrics": {"score": {"m1": v, "m2": 0.5}, "error": {"m1": e, "m2": 0.4},
+                                                     **{f"count_{j:03d}": j for j in range(150)}}}
+            for i, (v, e) in enumerate(zip(values_m1, errors_m1))]
+
+
+def test_format_table_fits_and_marks_the_best():
+    rows = _rows([0.9, 0.7, 0.95], [0.1, 0.3, 0.2])
+    head = {"columns": ["score.m1", "score.m2", "error.m1"], "better": {"score.m1": "max", "error.m1": "min"}}
+    lines = format_table(rows, head).splitlines()
+    assert lines[0].split() == ["sigma", "score.m1", "score.m2", "error.m1"]
+    body = [line.split() for line in lines[2:5]]
+    assert [r[1] for r in body] == ["0.9", "0.7", "0.95*"]          # max
+    assert [r[3] for r in body] == ["0.1*", "0.3", "0.2"]           # min
+    assert [r[2] for r in body] == ["0.5", "0.5", "0.5"]            # no direction: no mark
+    # every scalar metric (152 columns) does not fit: shortened, cut, and said so
+    text = format_table(rows, None)
+    assert max(len(x) for x in text.splitlines()) <= MAX_WIDTH
+    assert "more column(s) do not fit" in text
+
+
+def test_write_table_csv_and_json(tmp_path):
+    rows = _rows([0.9, 0.7], [0.1, 0.3])
+    with open(write_table(rows, str(tmp_path / "t.csv")), newline="") as fh:
+        table = list(csv.reader(fh))
+    assert table[0][0] == "sigma" and len(table[0]) == 1 + 2 + 2 + 150 and len(table) == 3
+    assert table[1][table[0].index("score.m1")] == "0.9"
+    write_table(rows, str(tmp_path / "t.json"))
+    assert json.loads((tmp_path / "t.json").read_text())[1]["metrics"]["error"]["m1"] == 0.3
+
+
+@pytest.fixture
+def project(tmp_path, monkeypatch):
+    (tmp_path / f"{PLUGIN}.py").write_text(PLUGIN_SOURCE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.chdir(tmp_path)
+    sys.modules.pop(PLUGIN, None)
+    registry.load_plugin(PLUGIN)
+    yield make_project(tmp_path, n=4, yaml_text=SYNTHETIC_YAML + EXTRA)
+    sys.modules.pop(PLUGIN, None)
+
+
+def test_headline_columns_default_requested_and_unknown(project):
+    from stages import api
+    plan = api.plan_pipeline(str(project), quiet=True)
+    rows = [{"point": {"sigma": "1"}, "metrics": {"score": {"m1": 0.9, "m2": 0.5}, "error": {"m1": 0.1, "m2": 0.4},
+                                                  "count_001": 1, "count_002": 2}}]
+    head = headline_columns(plan, rows)
+    assert head["columns"] == ["score.m1", "error.m1", "score.m2", "error.m2"]     # row by row
+    assert head["better"] == {"score.m1": "max", "score.m2": "max", "error.m1": "min", "error.m2": "min"}
+    assert headline_columns(plan, rows, ["count_*", "score.m2"])["columns"] == ["count_001", "count_002", "score.m2"]
+    with pytest.raises(PipelineError, match="no such metric"):
+        headline_columns(plan, rows, ["nope.*"])
+
+
+def test_sweep_cli_prints_headline_table_and_writes_csv(project, tmp_path):
+    env = plugins_env(PLUGIN)
+    env["PYTHONPATH"] += ":" + str(tmp_path)
+    res = cli(["sweep", "p.yaml", "--grid", "sigma=0.5,1,2", "--workers", "0", "--quiet", "--csv", "full.csv"],
+              cwd=tmp_path, env=env, timeout=300)
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    assert max(len(x) for x in lines) <= MAX_WIDTH
+    assert lines[0].split() == ["sigma", "score.m1", "error.m1", "score.m2", "error.m2"]
+    body = [line.split() for line in lines[2:5]]
+    assert [r[0] for r in body] == ["0.5", "1", "2"]
+    m1 = [float(r[1].rstrip("*")) for r in body]
+    assert [r[1].endswith("*") for r in body] == [v == max(m1) for v in m1]
+    with open(tmp_path / "full.csv", newline="") as fh:
+        full = list(csv.reader(fh))
+    assert len(full) == 4 and "count_149" in full[0] and "per_item.item000.value" not in full[0]  # >12: not flat
+    res = cli(["sweep", "p.yaml", "--grid", "sigma=0.5,1,2", "--workers", "0", "--quiet", "--metrics",
+               "count_00*"], cwd=tmp_path, env=env, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.splitlines()[0].split()[:4] == ["sigma", "count_000", "count_001", "count_002"]
+
+
+def test_progress_estimates_time_left():
+    stream = io.StringIO()
+    p = Progress({"s": 11}, stream=stream)
+    p.update("s", True)
+    assert p.eta("s") == ""                      # one task done: no rate yet
+    start = p.first_done["s"]
+    p.done["s"] = 6                               # 5 more tasks in 10 s after the first: 2 s each, 5 left
+    assert p.eta("s", now=start + 10) == ", ~10s left"
+    p.done["s"] = 2
+    assert p.eta("s", now=start + 100) == ", ~15.0 min left"
+    p.done["s"] = 11
+    assert p.eta("s", now=start + 100) == ""      # finished

@@ -1,0 +1,234 @@
+"""Bad input fails fast with ``error: ...`` and exit code 2 (configuration / usage) or 1 (environment), never a
+hang or a traceback: YAML aliases and duplicate keys, out-of-range options, folders given for files, bad grids,
+unusable parameter values, a closed scheduler, unwritable folders, Ctrl-C; and --quiet still names failures."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+
+from stages import api
+from stages.config import load_pipeline
+from stages.errors import PipelineError, UserError
+from stages.store import Store
+
+from tests.helpers import ROOT, cli, free_port, make_project
+
+BILLION_LAUGHS = "\n".join(
+    ['a0: &a0 ["lol","lol","lol","lol","lol","lol","lol","lol","lol"]']
+    + [f"a{i}: &a{i} [{','.join([f'*a{i - 1}'] * 9)}]" for i in range(1, 10)]
+    + ["stages: {s: {function: synthetic.summarize, params: {sigma: 1}}}", "params: {x: *a9}", ""])
+
+
+@pytest.fixture()
+def project(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    return make_project(tmp_path)
+
+
+def _fails(r: subprocess.CompletedProcess, code: int, *words: str) -> str:
+    """Assert a clean failure: exit ``code``, an ``error:`` line containing ``words``, no traceback."""
+    assert r.returncode == code, (r.returncode, r.stderr)
+    assert "Traceback" not in r.stderr, r.stderr
+    assert "error:" in r.stderr, r.stderr
+    for w in words:
+        assert w in r.stderr, (w, r.stderr)
+    return r.stderr
+
+
+# ---- YAML -------------------------------------------------------------------------------------------
+def test_a_billion_laughs_file_fails_fast(tmp_path):
+    p = tmp_path / "laughs.yaml"
+    p.write_text(BILLION_LAUGHS)
+    assert p.stat().st_size < 1024
+    _fails(cli(["status", str(p)], tmp_path, timeout=60), 2, "aliases expand to more than")
+
+
+def test_a_recursive_alias_is_refused(tmp_path):
+    p = tmp_path / "rec.yaml"
+    p.write_text("a: &a [*a]\nstages: {s: {function: synthetic.summarize}}\n")
+    with pytest.raises(PipelineError, match="recursive"):
+        load_pipeline(str(p))
+
+
+def test_a_small_alias_still_works(tmp_path):
+    p = tmp_path / "ok.yaml"
+    p.write_text("params: {base: &b {sigma: 2.0}, copy: *b}\n"
+                 "stages: {s: {function: synthetic.summarize, inputs: {distances: d}, params: {sigma: 1}},\n"
+                 "         d: {function: synthetic.pair_distances, pairs: items}}\n"
+                 "datasets: {items: {files: 'data/*.txt', optional: true}}\n")
+    assert load_pipeline(str(p)).params["copy"] == {"sigma": 2.0}
+
+
+def test_duplicate_keys_are_an_error_naming_both_lines(tmp_path):
+    p = tmp_path / "dup.yaml"
+    p.write_text("params:\n  sigma: 1\n  work: 2\n  sigma: 3\nstages: {s: {function: synthetic.summarize}}\n")
+    with pytest.raises(PipelineError) as e:
+        load_pipeline(str(p))
+    assert "duplicate key 'sigma'" in str(e.value) and "line 2" in str(e.value) and "line 4" in str(e.value)
+
+
+def test_a_binary_file_as_pipeline_is_a_clear_error(tmp_path):
+    _fails(cli(["run", "/bin/ls", "--workers", "0"], tmp_path), 2, "not a text file")
+
+
+# ---- names ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("text, what", [
+    ("name: ../../x\nstages: {s: {function: synthetic.summarize}}\n", "pipeline"),
+    ("stages: {../elsewhere/precious: {function: synthetic.summarize}}\n", "stage"),
+    ("stages: {'my stage': {function: synthetic.summarize}}\n", "stage"),
+    ("datasets: {'a/b': {file: x}}\nstages: {s: {function: synthetic.summarize}}\n", "dataset"),
+])
+def test_names_must_be_plain_identifiers(tmp_path, text, what):
+    p = tmp_path / "names.yaml"
+    p.write_text(text)
+    with pytest.raises(PipelineError, match=f"{what} name .* is not a plain identifier"):
+        load_pipeline(str(p))
+
+
+# ---- options ----------------------------------------------------------------------------------------
+@pytest.mark.parametrize("workers", ["-1", "1000", "two"])
+def test_workers_out_of_range_is_a_usage_error(project, tmp_path, workers):
+    r = cli(["run", str(project), "--workers", workers], tmp_path, timeout=60)
+    assert r.returncode == 2 and "--workers" in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("command", [["run", "{p}", "--workers", "0", "--summary-json", "{d}"],
+                                     ["report", "{p}", "--out", "{d}"]])
+def test_a_folder_given_for_an_output_file_is_a_usage_error(project, tmp_path, command):
+    folder = tmp_path / "somewhere"
+    folder.mkdir()
+    args = [a.format(p=project, d=folder) for a in command]
+    r = cli(args, tmp_path, timeout=60)
+    assert r.returncode == 2 and "is a folder" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert list(folder.iterdir()) == []  # no .tmp left behind
+
+
+def test_atomic_write_to_a_folder_leaves_no_tmp(tmp_path):
+    from stages.store import atomic_write_text
+
+    with pytest.raises(IsADirectoryError):
+        atomic_write_text(str(tmp_path), "x")
+    assert not [p for p in tmp_path.parent.iterdir() if p.name.startswith(tmp_path.name + ".")]
+
+
+@pytest.mark.parametrize("grid", ["sigma", "sigma=", "=1,2", "sigma=,"])
+def test_bad_grid_syntax_is_a_usage_error(project, tmp_path, grid):
+    _fails(cli(["sweep", str(project), "--grid", grid, "--workers", "0"], tmp_path, timeout=60), 2, "--grid")
+
+
+def test_a_closed_scheduler_is_a_clear_error(project, tmp_path):
+    address = f"tcp://127.0.0.1:{free_port()}"  # nothing listens there
+    err = _fails(cli(["run", str(project), "--scheduler", address], tmp_path, timeout=120), 1,
+                 address, "fix:")
+    assert "dask scheduler" in err
+
+
+def test_a_malformed_scheduler_address_is_a_clear_error(project, tmp_path):
+    _fails(cli(["run", str(project), "--scheduler", "not-an-address"], tmp_path, timeout=60), 1, "not-an-address")
+
+
+# ---- parameter values the functions cannot use -------------------------------------------------------
+def test_a_negative_generator_size_is_a_config_error(tmp_path):
+    p = tmp_path / "g.yaml"
+    p.write_text("generated: {chairs: {generator: generate.chairs, params: {n: -3}}}\n"
+                 "datasets: {shapes: {files: '${generated.chairs}/*.obj'}}\n"
+                 "stages: {views: {function: align.views, foreach: shapes, inputs: {files: shapes}}}\n")
+    with pytest.raises(PipelineError) as e:
+        load_pipeline(str(p))
+    assert "generated.chairs.params" in str(e.value) and "'n' = -3" in str(e.value)
+
+
+@pytest.mark.parametrize("n_views", [0, -4])
+def test_n_views_below_one_is_a_config_error(tmp_path, monkeypatch, n_views):
+    monkeypatch.chdir(ROOT)
+    with pytest.raises(PipelineError) as e:
+        load_pipeline("pipeline.yaml", [f"n_views={n_views}"], cache_dir=str(tmp_path / "c"))
+    assert "stages.views.params" in str(e.value) and "n_views" in str(e.value)
+
+
+def test_one_view_is_a_warning(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(ROOT)
+    load_pipeline("pipeline.yaml", ["n_views=1"], cache_dir=str(tmp_path / "c"))
+    assert "metrics mean nothing" in capsys.readouterr().err
+
+
+# ---- folders that cannot be used --------------------------------------------------------------------
+def _snapshot(folder: Path) -> dict:
+    return {str(p): (p.stat().st_size, p.stat().st_mtime_ns) for p in folder.rglob("*")}
+
+
+def test_status_results_report_and_dry_run_write_nothing_to_the_cache(project, tmp_path):
+    """What "works on a read-only cache" means: these commands never write there."""
+    assert cli(["run", str(project), "--workers", "0"], tmp_path).returncode == 0
+    (tmp_path / "data" / "s001.txt").write_text("changed\n")  # so the planner has something new to hash
+    cache = tmp_path / "cache"
+    before = _snapshot(cache)
+    for command in (["status", str(project)], ["results", str(project)], ["run", str(project), "--dry-run"],
+                    ["report", str(project), "--out", str(tmp_path / "r.html")]):
+        r = cli(command, tmp_path)
+        assert r.returncode in (0, 3) and "Traceback" not in r.stderr, r.stderr
+    assert _snapshot(cache) == before
+
+
+def test_run_on_an_unwritable_cache_is_a_clear_error(project, monkeypatch):
+    monkeypatch.setattr(Store, "writable", lambda self: False)
+    with pytest.raises(UserError, match="cannot write the cache folder"):
+        api.run(str(project), workers=0, quiet=True)
+
+
+def test_an_unwritable_output_folder_is_a_clear_error(project, tmp_path):
+    (tmp_path / "blocker").write_text("a file where the output folder's parent should be\n")
+    err = _fails(cli(["run", str(project), "--workers", "0", "--out", str(tmp_path / "blocker" / "out")],
+                     tmp_path), 1, "output folder")
+    assert "--out" in err
+    r = cli(["run", str(project), "--workers", "0", "--summary-json", "s.json"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert sum(s["executed"] for s in summary["stages"].values()) == 0  # everything was stored the first time
+
+
+# ---- failures and interruptions ---------------------------------------------------------------------
+def test_quiet_still_prints_each_failure(project, tmp_path):
+    r = cli(["run", str(project), "--workers", "0", "--quiet", "--set", "feat.fail_on=item 3 "], tmp_path)
+    assert r.returncode == 1
+    assert "FAILED feat[s003]" in r.stderr and "marker" in r.stderr, r.stderr
+
+
+def test_ctrl_c_to_the_process_group_shuts_down_without_worker_tracebacks(project, tmp_path):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-m", "stages", "run", str(project), "--set", "work=2000",
+                             "--workers", "2"], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    lines: list[str] = []
+    started = threading.Event()
+
+    def read():
+        for line in proc.stderr:
+            lines.append(line)
+            if "done" in line:  # workers are up and busy
+                started.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    assert started.wait(timeout=240), "".join(lines)
+    os.killpg(proc.pid, signal.SIGINT)
+    proc.wait(timeout=120)
+    reader.join(timeout=30)
+    err = "".join(lines)
+    assert proc.returncode == 130, err
+    assert "interrupted" in err and "Traceback" not in err, err
+
+
+# ---- the dashboard ----------------------------------------------------------------------------------
+def test_the_local_dashboard_listens_on_localhost_only(dask_client):
+    sockets = dask_client.cluster.scheduler.http_server._sockets.values()
+    hosts = {s.getsockname()[0] for s in sockets}
+    assert hosts == {"127.0.0.1"}
+    assert dask_client.cluster.dashboard_link.startswith("http://127.0.0.1:")
