@@ -47,7 +47,7 @@ def print_shares(title: str, timings: dict[str, list[float]], whole: str) -> Non
 
 def load_checked(path: str) -> dict:
     """The mesh as the corr.mesh stage gives it: {"V", "F", "area"} (repaired, checked for intrinsic methods)."""
-    V, F, _ = load_repaired_mesh(path)
+    V, F, _ = load_repaired_mesh(path, keep_largest_component=True)
     check_correspondence_mesh(V, F, name=os.path.basename(path))
     return {"V": V, "F": F, "area": surface_area(V, F)}
 

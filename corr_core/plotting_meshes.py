@@ -1,8 +1,9 @@
 """Pictures of meshes with per-vertex colours and labelled points, rendered with the project's own CPU ray
 caster (Open3D ``RaycastingScene``, the cameras of ``corr_core.alignment.render``): no display needed.
 
-Conventions: meshes are V: (n,3) float, F: (m,3) int, y up; a mesh is normalised for the picture only
-(bounding-box centre at the origin, largest distance 1). Views are the cameras of
+Conventions: meshes are V: (n,3) float, F: (m,3) int; for the picture only, every mesh of a figure is turned
+so that the template's longest bounding-box axis is up (y) and normalised (bounding-box centre at the origin,
+largest distance 1). Views are the cameras of
 ``render.camera_frames(n_views)``: view k looks from azimuth k * 360 / n_views degrees (view 0 from +z).
 Images are (S, S, 3) float RGB in [0, 1], white background.
 """
@@ -16,7 +17,7 @@ from corr_core._open3d import load_open3d
 from corr_core.alignment.render import camera_frames, view_rays
 from corr_core.geometry.primitives import face_normals
 
-__all__ = ["normalise_for_picture", "render_colored", "project_vertices", "coordinate_colors",
+__all__ = ["up_axis", "stand_up", "normalise_for_picture", "render_colored", "project_vertices", "coordinate_colors",
            "pull_back_colors", "crop_box", "plot_landmark_panels", "plot_dense_panels", "plot_azimuths"]
 
 MARGIN = 1.05
@@ -28,6 +29,24 @@ def normalise_for_picture(V: np.ndarray) -> np.ndarray:
     centred = V - (V.min(0) + V.max(0)) / 2
     radius = float(np.linalg.norm(centred, axis=1).max()) or 1.0
     return centred / radius
+
+
+def up_axis(V: np.ndarray) -> int:
+    """The axis (0 x, 1 y, 2 z) of the largest bounding-box extent of V: (n,3), shown upright (e.g. a body
+    lying along x, as in SCAPE, stands up in the pictures)."""
+    V = np.asarray(V, np.float64)
+    return int(np.argmax(V.max(0) - V.min(0)))
+
+
+def stand_up(V: np.ndarray, axis: int) -> np.ndarray:
+    """V: (n,3) rotated (a proper rotation) so that ``axis`` points along +y, the cameras' up."""
+    V = np.asarray(V, np.float64)
+    x, y, z = V[:, 0], V[:, 1], V[:, 2]
+    if axis == 0:
+        return np.stack([-y, x, z], axis=1)    # Rz(+90 deg): +x -> +y
+    if axis == 2:
+        return np.stack([x, z, -y], axis=1)    # Rx(-90 deg): +z -> +y
+    return V
 
 
 def _scene(V: np.ndarray, F: np.ndarray):
@@ -175,9 +194,10 @@ def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, pred
     Writes one PNG to ``path``.
     """
     plt = _pyplot()
+    axis = up_axis(template[0])
     panels = []   # (name, row, image, xy, visible, right)
     for name, (V, F) in [("template", template)] + list(poses.items()):
-        Vn = normalise_for_picture(V)
+        Vn = normalise_for_picture(stand_up(V, axis))
         L = len(landmark_vids[name])
         pred = np.arange(L) if name == "template" else np.asarray(predictions[name], np.int64)
         vids = np.asarray(landmark_vids[name], np.int64)[pred]
@@ -191,6 +211,7 @@ def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, pred
     n_rows = len(views) if n_cols == n_panels else -(-n_panels // n_cols)
     place = (lambda k, r: (r, k // len(views))) if n_cols == n_panels else (lambda k, r: divmod(k, n_cols))
     aspect = (box[1].stop - box[1].start) / (box[0].stop - box[0].start) if box[0].start is not None else 1.0
+    aspect = max(aspect, 0.8)   # room for the titles
     extra = 1.8 if legend else 0.2
     fig, axes = plt.subplots(n_rows, n_cols, figsize=(2.7 * aspect * n_cols + extra, 2.9 * n_rows), squeeze=False)
     for ax in axes.ravel():
@@ -207,8 +228,8 @@ def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, pred
             ax.annotate(str(i + 1), xy[i], xytext=(3, 2), textcoords="offset points", fontsize=6, alpha=alpha)
         if r == 0 or n_cols != n_panels:
             wrong = int((~right).sum())
-            ax.set_title(name if name == "template" else f"{name}: {len(right) - wrong}/{len(right)} right",
-                         fontsize=9, color="k" if wrong == 0 else "#aa0000")
+            ax.set_title(name if name == "template" else f"{name}\n{len(right) - wrong}/{len(right)} right",
+                         fontsize=8, color="k" if wrong == 0 else "#aa0000")
     if legend:
         fig.text(0.995, 0.5, "\n".join(f"{i + 1:>2} {n}" for i, n in enumerate(names)), fontsize=6.5,
                  va="center", ha="right", family="monospace")
@@ -234,10 +255,12 @@ def plot_dense_panels(template: tuple, poses: dict, vertex_maps: dict, captions:
     colors = coordinate_colors(normalise_for_picture(Vt))
     columns = [("template", Vt, Ft, colors)] + [(n, V, F, pull_back_colors(colors, vertex_maps[n], V))
                                                 for n, (V, F) in poses.items()]
-    panels = [(name, r, render_colored(normalise_for_picture(V), F, col, view, n_views, size))
+    axis = up_axis(Vt)
+    panels = [(name, r, render_colored(normalise_for_picture(stand_up(V, axis)), F, col, view, n_views, size))
               for name, V, F, col in columns for r, view in enumerate(views)]
     box = crop_box([p[2] for p in panels])
     aspect = (box[1].stop - box[1].start) / (box[0].stop - box[0].start) if box[0].start is not None else 1.0
+    aspect = max(aspect, 0.8)   # room for the titles
     fig, axes = plt.subplots(len(views), len(columns), figsize=(2.7 * aspect * len(columns) + 0.4,
                                                                 2.9 * len(views)), squeeze=False)
     for k, (name, r, image) in enumerate(panels):

@@ -34,8 +34,9 @@ PLUGIN = Plugin(
             row_inputs={"descriptor_sparse": "descriptor", "mrf_sparse": "mrf",
                         "mrf_oriented_sparse": "mrf_oriented", "mobius_sparse": "mobius_votes",
                         "mobius_all": "mobius_votes"},
-            figures=("corr.landmark_figures:landmarks_worst_per_method.png", "corr.evaluate:dense_map_error_curve.png")),
+            figures=("corr.landmark_figures:landmarks_worst_per_method.png",
+                     "corr.evaluate:dense_map_error_curve.png")),
     ),
-    sweep_metrics=("ground_truth.exact", "ground_truth.mean_error_deg", "seed_stability.min", "equivariance", "accuracy.descriptor",
-                   "accuracy.mrf", "accuracy.mrf_oriented", "accuracy.mobius_all", "dense_map.mean_error"),
+    sweep_metrics=("ground_truth.exact", "ground_truth.mean_error_deg", "seed_stability.min", "equivariance",
+                   "accuracy.descriptor", "accuracy.mrf", "accuracy.mrf_oriented", "accuracy.mobius_all", "dense_map.mean_error"),
 )

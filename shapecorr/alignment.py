@@ -36,10 +36,15 @@ def _input_kind(files: list[str]) -> str:
                      f"(extensions {sorted(exts)}); give one mesh ({'/'.join(MESH_EXTENSIONS)}) or NNN_V.png views per shape")
 
 
-def _check_views(*, n_views: int, image_size: int, elevation_deg: float, center: str, up: str = "y") -> list[str]:
-    """Config-time check of align.views params: ValueError for unusable values, warnings for meaningless ones."""
+def _check_up(up: str) -> None:
+    """ValueError naming the parameter 'up' unless it is one of the accepted axes (x, y, z)."""
     if up not in azimuth.UP_AXES:
         raise ValueError(f"parameter 'up' = {up!r}: the collection's up axis must be one of {sorted(azimuth.UP_AXES)}")
+
+
+def _check_views(*, n_views: int, image_size: int, elevation_deg: float, center: str, up: str = "y") -> list[str]:
+    """Config-time check of align.views params: ValueError for unusable values, warnings for meaningless ones."""
+    _check_up(up)
     if n_views < 1:
         raise ValueError(f"parameter 'n_views' = {n_views}: a shape needs at least 1 view (the default is 16)")
     if image_size < 8:
@@ -162,7 +167,12 @@ def _zip_folder(folder: str) -> None:
                 z.write(os.path.join(folder, fn), arcname=os.path.join(os.path.basename(folder), fn))
 
 
-@register("align.export", group="alignment", fanout="once", writes_files=True)
+def _check_export(*, center: str, up: str = "y") -> None:
+    """Config-time check of align.export params (the up axis, as for align.views)."""
+    _check_up(up)
+
+
+@register("align.export", group="alignment", fanout="once", writes_files=True, validate=_check_export)
 def export(shapes, solution, *, center: str = "area", up: str = "y", out_dir: str) -> dict:
     """Aligned outputs: alignment.csv (shape, label, continuous angle_deg, symmetry_order); for meshes the
     normalized OBJs turned to +y up (``up``) and by their continuous angle, and aligned_meshes.zip; for

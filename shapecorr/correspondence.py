@@ -18,6 +18,7 @@ from corr_core import plotting
 from corr_core.correspondence import matchers, measures, mesh_features
 from corr_core.correspondence.landmarks import read_landmarks, subset_positions
 from corr_core.geometry import checks as meshcheck
+from corr_core.geometry.intrinsic import IntrinsicMesh
 from corr_core.geometry.mesh_io import load_mesh
 from corr_core.geometry.primitives import mesh_edges, surface_area
 from corr_core.geometry.repair import repair_mesh, warn_repairs
@@ -38,21 +39,31 @@ def _sparse_index(all_path: str, sparse_path: str, n_vertices: int | None = None
 
 
 @register("corr.mesh", group="correspondence", fanout="item")
-def mesh(path, *, allow_components: bool = False) -> dict:
-    """Load, repair (vertex ids kept) and check one mesh; several components or vertices used by no face are
-    errors (the geodesic and flattening methods need one surface through every vertex).
+def mesh(path) -> dict:
+    """Load, repair (vertex ids kept) and check one mesh for the intrinsic methods: only the largest connected
+    component is kept (its faces; the vertices of small loose pieces and those no face uses stay in V, with
+    their ids, and every method ignores them: ``corr_core.geometry.intrinsic.IntrinsicMesh``).
 
-    Returns {"V": (n,3) float64, "F": (m,3) int64 repaired faces, "area": float, "warnings": [str],
-    "repairs": [record] (``corr_core.geometry.repair``: what was dropped / flipped, each naming the file)}.
+    Returns {"V": (n,3) float64 all vertices in file order, "F": (m,3) int64 repaired faces of the largest
+    component, "area": float (of F), "name": file name, "warnings": [str], "repairs": [record]
+    (``corr_core.geometry.repair``: what was dropped / flipped / ignored, each naming the file)}.
     """
     name = os.path.basename(path)
     V, F = load_mesh(path)
-    F, repairs = repair_mesh(V, F, name)
+    F, repairs = repair_mesh(V, F, name, keep_largest_component=True)
     warn_repairs(repairs)
-    warnings = meshcheck.check_correspondence_mesh(V, F, name=name, allow_components=allow_components,
-                                                   allow_unreferenced=False)
-    return {"V": V, "F": F.astype(np.int64), "area": surface_area(V, F), "warnings": list(warnings),
-            "repairs": repairs}
+    warnings = meshcheck.check_correspondence_mesh(V, F, name=name, allow_unreferenced=True)
+    return {"V": V, "F": F.astype(np.int64), "area": surface_area(V, F), "name": name,
+            "warnings": list(warnings), "repairs": repairs}
+
+
+def _landmarks_on(mesh: dict, path: str) -> np.ndarray:
+    """(L,) int landmark vertex ids of ``path``, checked to lie on the mesh's kept component (an error naming
+    the landmark, the landmark file and the mesh file otherwise)."""
+    ids, names = _landmarks(path, len(mesh["V"]))
+    IntrinsicMesh(mesh["V"], mesh["F"]).to_sub(
+        ids, what="landmark", names=names, source=f"{os.path.basename(path)} on {mesh.get('name', 'the mesh')}")
+    return ids
 
 
 @register("corr.spectral", group="correspondence", fanout="item")
@@ -62,7 +73,7 @@ def spectral(mesh, landmarks, *, k: int = 100, n_times: int = 16, n_energies: in
 
     Returns {"hks": (L, n_times), "wks": (L, n_energies), "evals": (k,)}.
     """
-    ids, _ = _landmarks(landmarks, len(mesh["V"]))
+    ids = _landmarks_on(mesh, landmarks)
     out = mesh_features.spectral_features(mesh["V"], mesh["F"], ids, k=k, n_times=n_times, n_energies=n_energies,
                                           wks_variance=wks_variance)
     return {**out, "n_vertices": len(mesh["V"])}  # matchers tell whether the landmark truth applies
@@ -74,7 +85,7 @@ def geodesics(mesh, landmarks) -> dict:
 
     Returns {"D": (L,L) float, "diameter": float, "chirality": (L,L,L) float}.
     """
-    ids, _ = _landmarks(landmarks, len(mesh["V"]))
+    ids = _landmarks_on(mesh, landmarks)
     return {**mesh_features.geodesic_features(mesh["V"], mesh["F"], ids), "n_vertices": len(mesh["V"])}
 
 
@@ -116,7 +127,7 @@ def flatten(mesh, path, landmarks, flattened=None, samples=None, *, source: str 
     sample_vids = None
     if sample_source in ("auto", "given") and samples:
         sample_vids, _ = read_landmarks(samples, n_vertices=len(V))
-    ids, _ = _landmarks(landmarks, len(V))
+    ids = _landmarks_on(mesh, landmarks)
     out = mesh_features.flattening_features(V, F, ids, Z=given, sample_vids=sample_vids, n_samples=n_samples)
     return {**out, "area": float(mesh["area"]), "source": "computed" if given is None else "given",
             "sample_source": "fps" if sample_vids is None else "given"}

@@ -57,7 +57,7 @@ class Progress:
         self.first_done: dict[str, float] = {}   # stage -> time its first task finished (for the estimate)
 
     def eta(self, stage: str, now: float | None = None) -> str:
-        """`` ~12s left`` for a stage with at least 2 tasks done and some left (rate measured from its first
+        """``", ~12s left"`` for a stage with at least 2 tasks done and some left (rate measured from its first
         finished task, so the scheduler's start-up does not count); ``""`` when there is no estimate."""
         now = time.time() if now is None else now
         total, done = self.totals[stage], self.done[stage]
@@ -80,7 +80,8 @@ class Progress:
         if self.tty:
             width = 24
             bar = "#" * (width * done // max(total, 1))
-            self.stream.write(f"\r  {stage:<16} [{bar:<{width}}] {done}/{total}{fail}  {time.time() - self.t0:6.1f}s{self.eta(stage)} ")
+            elapsed = time.time() - self.t0
+            self.stream.write(f"\r  {stage:<16} [{bar:<{width}}] {done}/{total}{fail}  {elapsed:6.1f}s{self.eta(stage):<20}")
             if done == total:
                 self.stream.write("\n")
             self.stream.flush()
@@ -88,7 +89,8 @@ class Progress:
             self.last_pct[stage] = pct
             self.last_print = time.time()
             if total >= 8 or done == total:
-                print(f"  {stage}: {done}/{total} done{fail} ({time.time() - self.t0:.1f}s{self.eta(stage)})", file=self.stream, flush=True)
+                print(f"  {stage}: {done}/{total} done{fail} ({time.time() - self.t0:.1f}s{self.eta(stage)})",
+                      file=self.stream, flush=True)
 
 
 SCHEDULER_TIMEOUT_S = 10

@@ -263,7 +263,8 @@ class Store:
             raise UserError(f"the cache {self.root} is not a folder", fix="choose a folder for --cache / 'cache:'")
         if os.path.isdir(self.root):
             try:
-                foreign = sorted(n for n in os.listdir(self.root) if not n.startswith(_CACHE_NAMES))
+                foreign = sorted(n for n in os.listdir(self.root)  # hidden files (.DS_Store, .nfs*) do not count
+                                 if not n.startswith(_CACHE_NAMES) and not n.startswith("."))
             except OSError as exc:
                 raise UserError(f"cannot read the cache folder {self.root}: {exc.strerror}") from None
             if foreign:

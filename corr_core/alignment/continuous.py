@@ -5,7 +5,7 @@ C_ij is sampled at V whole view steps, but as a function of the rotation it is s
 (band-limited) interpolation through the V samples, the inverse real DFT evaluated between the samples, gives a
 continuous relative rotation d_ij = argmin_phi C_ij(phi) per pair. The continuous labels t: (N,) float steps
 are then the weighted least-squares solution of t_j - t_i ~= d_ij over the pairs that agree with the discrete
-labels to within one view (a graph-Laplacian system; the others are outliers for this shape). Shapes with a
+labels to within one view (a graph-Laplacian system; the others are outliers for this pair). Shapes with a
 rotational symmetry of order k are defined modulo V/k steps: their pairs are unwrapped modulo that period.
 """
 from __future__ import annotations
@@ -28,14 +28,11 @@ def _spectrum(C: np.ndarray) -> np.ndarray:
 
 
 def _evaluate(c: np.ndarray, phi: np.ndarray, V: int, derivative: int = 0) -> np.ndarray:
-    """Band-limited values (or their ``derivative``-th derivative in phi) of spectra c (..., K) at phi (..., m)."""
-    k = np.arange(c.shape[-1])
-    w = 2j * np.pi * k / V
+    """Band-limited values (or their ``derivative``-th derivative in phi) of spectra c (..., K) at phi (..., m):
+    Re sum_k c_k (i w_k)^derivative exp(i w_k phi), w_k = 2 pi k / V (the Nyquist coefficient is real, so its
+    term is c cos(pi phi), the symmetric choice)."""
+    w = 2j * np.pi * np.arange(c.shape[-1]) / V
     e = np.exp(w * phi[..., None]) * w ** derivative  # (..., m, K)
-    if V % 2 == 0 and derivative == 0:  # Nyquist: cos, not exp (a real interpolant with no sine term)
-        e[..., -1] = np.cos(np.pi * phi)
-    elif V % 2 == 0:
-        e[..., -1] = np.real(((1j * np.pi) ** derivative) * np.exp(1j * np.pi * phi))
     return np.real(np.einsum("...mk,...k->...m", e, c))
 
 
@@ -46,22 +43,41 @@ def interpolate_costs(C: np.ndarray, phi: np.ndarray) -> np.ndarray:
     return _evaluate(_spectrum(C), np.asarray(phi, dtype=np.float64), C.shape[-1])
 
 
-def continuous_argmin(C: np.ndarray, grid: int = 40, newton_steps: int = 3) -> np.ndarray:
-    """(...,) float steps in [0, V): the minimiser of the band-limited interpolation of C (..., V) within one
-    step of its smallest sample (a grid of ``grid`` points per step, then Newton steps kept inside the bracket).
-    Ties between equal samples go to the first one (np.argmin), so the result is deterministic."""
+def _fine_grid(c: np.ndarray, V: int, samples_per_step: int) -> np.ndarray:
+    """(..., V * samples_per_step) band-limited values at phi = j / samples_per_step: one zero-padded inverse
+    real FFT of the spectra c (..., K)."""
+    n = V * samples_per_step
+    X = np.zeros(c.shape[:-1] + (n // 2 + 1,), dtype=np.complex128)
+    X[..., 0] = c[..., 0] * n
+    X[..., 1:c.shape[-1]] = c[..., 1:] * (n / 2)
+    return np.fft.irfft(X, n=n, axis=-1)
+
+
+def _slopes(c: np.ndarray, phi: np.ndarray, V: int) -> tuple[np.ndarray, np.ndarray]:
+    """First and second derivatives (...,) of the band-limited function of spectra c (..., K) at phi (...,)."""
+    K = c.shape[-1]
+    z = np.exp(2j * np.pi * phi / V)
+    powers = np.cumprod(np.concatenate([np.ones(phi.shape + (1,), complex),
+                                        np.repeat(z[..., None], K - 1, axis=-1)], axis=-1), axis=-1)  # z^k
+    w = 2j * np.pi * np.arange(K) / V
+    cz = c * powers
+    return np.real(cz @ w), np.real(cz @ (w * w))
+
+
+def continuous_argmin(C: np.ndarray, samples_per_step: int = 8, newton_steps: int = 3) -> np.ndarray:
+    """(...,) float steps in [0, V): the minimiser of the band-limited interpolation of C (..., V): the smallest
+    value on a grid of ``samples_per_step`` points per step (``_fine_grid``), then Newton steps kept within half
+    a grid cell. Ties go to the first grid point, so the result is deterministic."""
     C = np.asarray(C)
     V = C.shape[-1]
     c = _spectrum(C)
-    m = np.argmin(C, axis=-1).astype(np.float64)
-    offsets = np.linspace(-1.0, 1.0, 2 * grid + 1)
-    phi = m[..., None] + offsets
-    best = phi[..., 0] * 0 + np.take_along_axis(phi, np.argmin(_evaluate(c, phi, V), -1)[..., None], -1)[..., 0]
+    start = np.argmin(_fine_grid(c, V, samples_per_step), axis=-1) / samples_per_step
+    best = start.copy()
+    half_cell = 0.5 / samples_per_step
     for _ in range(newton_steps):
-        g = _evaluate(c, best[..., None], V, 1)[..., 0]
-        h = _evaluate(c, best[..., None], V, 2)[..., 0]
+        g, h = _slopes(c, best, V)
         step = np.where(h > 0, -g / np.where(h > 0, h, 1.0), 0.0)
-        best = np.clip(best + np.clip(step, -0.5 / grid, 0.5 / grid), m - 1.0, m + 1.0)
+        best = np.clip(best + step, start - half_cell, start + half_cell)
     return np.mod(best, V)
 
 
@@ -70,42 +86,51 @@ def _wrap(x: np.ndarray, period: np.ndarray | float) -> np.ndarray:
     return (x + 0.5 * period) % period - 0.5 * period
 
 
+def _pair_minima(C: np.ndarray, iu: np.ndarray, ju: np.ndarray, chunk: int) -> tuple[np.ndarray, np.ndarray]:
+    """(d, cmin): continuous argmin (P,) float and smallest sample (P,) of C[iu, ju] (P pairs), ``chunk`` pairs
+    at a time (bounded memory for large collections)."""
+    d = np.empty(len(iu))
+    cmin = np.empty(len(iu))
+    for s in range(0, len(iu), chunk):
+        block = np.asarray(C[iu[s:s + chunk], ju[s:s + chunk]], dtype=np.float64)
+        d[s:s + chunk] = continuous_argmin(block)
+        cmin[s:s + chunk] = block.min(axis=1)
+    return d, cmin
+
+
 def refine_labels(C: np.ndarray, labels: np.ndarray, sigma: float, periods: np.ndarray | None = None,
-                  tolerance: float = 1.0) -> np.ndarray:
+                  tolerance: float = 1.0, chunk: int = 16384) -> np.ndarray:
     """Continuous labels t: (N,) float steps, near the discrete ``labels`` (N,) int, from pair costs C (N, N, V).
 
     Pair (i, j), i < j: d_ij = continuous_argmin C_ij, weight exp(-min C_ij / sigma); the pair counts only when
     d_ij is within ``tolerance`` steps of labels_j - labels_i modulo the pair's period
     p_ij = min(periods_i, periods_j) (V for asymmetric shapes, V/k for a k-fold symmetric one, 0 for a fully
-    symmetric one: its pairs are left out). Weighted least squares of t_j - t_i = d_ij (unwrapped near the
-    labels), with the gauge sum_i (t_i - labels_i) = 0 per connected part, so round(t) ~= labels.
-    A shape with no usable pair keeps its label.
+    symmetric one: its pairs are left out). t = labels + delta with delta the weighted least-squares solution
+    of delta_j - delta_i = d_ij - (labels_j - labels_i) (unwrapped near 0), gauge sum delta = 0 over each
+    connected part of the graph of usable pairs, so round(t) ~= labels. A shape with no usable pair keeps its
+    label.
     """
     C = np.asarray(C)
     N, _, V = C.shape
     x = np.asarray(labels, dtype=np.float64)
     per = np.full(N, float(V)) if periods is None else np.asarray(periods, dtype=np.float64)
     iu, ju = np.triu_indices(N, 1)
-    Cp = C[iu, ju]                                                   # (P, V)
-    d = continuous_argmin(Cp)
+    d, cmin = _pair_minima(C, iu, ju, chunk)
     p = np.minimum(per[iu], per[ju])
     usable = p > 0
-    p_safe = np.where(usable, p, V)
-    residual = _wrap(d - (x[ju] - x[iu]), p_safe)                     # continuous minus discrete, (P,)
-    w = np.exp(-Cp.min(axis=1) / sigma) * usable * (np.abs(residual) <= tolerance)
-    # weighted least squares of delta_j - delta_i = residual with t = x + delta
-    L = np.zeros((N, N))
-    b = np.zeros(N)
-    np.add.at(L, (iu, iu), w)
-    np.add.at(L, (ju, ju), w)
+    residual = _wrap(d - (x[ju] - x[iu]), np.where(usable, p, V))    # continuous minus discrete, (P,)
+    w = np.exp(-cmin / sigma) * usable * (np.abs(residual) <= tolerance)
+    L = np.zeros((N, N))                                               # weighted graph Laplacian
     np.add.at(L, (iu, ju), -w)
-    np.add.at(L, (ju, iu), -w)
+    L += L.T
+    np.fill_diagonal(L, -L.sum(axis=1))
+    b = np.zeros(N)
     np.add.at(b, ju, w * residual)
     np.add.at(b, iu, -w * residual)
-    L += np.full((N, N), 1.0 / N) * (L.diagonal().max() if N else 1.0) * 1e-9  # tiny gauge term, well-posed
-    delta = np.linalg.lstsq(L, b, rcond=None)[0]
-    delta -= delta.mean()
-    delta[L.diagonal() <= 1e-6 * max(L.diagonal().max(), 1e-300)] = 0.0
+    # a tiny ridge: in each connected part of the graph b sums to 0, so the solution has sum(delta) = 0 there
+    # (the gauge), and a shape with no usable pair gets delta = 0
+    ridge = 1e-8 * max(L.diagonal().max(), 1e-300)
+    delta = np.linalg.solve(L + ridge * np.eye(N), b)
     return x + delta
 
 

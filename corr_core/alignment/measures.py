@@ -12,7 +12,8 @@ from corr_core import mrf
 from corr_core.alignment import azimuth
 from corr_core.alignment.circulant import CirculantPairwise
 from corr_core.alignment.pair_costs import shift_costs
-from corr_core.alignment.solvers import SOLVERS, knn_neighbors, solve_labels, uniform_unary
+from corr_core.alignment.solvers import (SOLVERS, knn_neighbors, solve_labels, solve_labels_with_symmetry,
+                                        uniform_unary)
 
 __all__ = ["agreement", "seed_stability", "equivariance", "solver_quality", "ground_truth_agreement",
            "continuous_error", "mode_agreement", "evaluate_alignment"]
@@ -25,24 +26,40 @@ def agreement(a: np.ndarray, b: np.ndarray, V: int) -> dict:
             "within_one_view": float(azimuth.agreement_up_to_offset(a, b, V, tolerance=1)[0]), "n": int(len(a))}
 
 
+def _orders_and_agreement(solution: dict, V: int):
+    """(orders (N,) or None, agree(a, b) -> float): agreement up to one offset, modulo each shape's symmetry
+    when the solution has symmetric shapes (``agreement_modulo``), else exact (``agreement_up_to_offset``)."""
+    orders = solution.get("symmetry_order")
+    if orders is None or np.all(np.asarray(orders) == 1):
+        return None, lambda a, b: azimuth.agreement_up_to_offset(a, b, V)[0]
+    k = np.asarray(orders)
+    periods = np.where(k > 0, V / np.maximum(k, 1), 0.0)
+    return k, lambda a, b: agreement_modulo(a, b, V, periods)
+
+
 def seed_stability(C: np.ndarray, solution: dict, seeds: list, op: CirculantPairwise | None = None) -> dict:
-    """Agreement (exact, up to one offset) with the solution of the labelings from other unary seeds:
-    {"min", "mean", "n_seeds"}. op: the solution graph's operator, if already built."""
+    """Agreement (exact up to one offset; modulo each shape's symmetry when some are symmetric) with the
+    solution of the labelings from other unary seeds: {"min", "mean", "n_seeds"}. op: the solution graph's
+    operator, if already built."""
     labels, V = np.asarray(solution["labels"]), C.shape[2]
-    others = [solve_labels(C, solution["solver"], float(solution["sigma"]), int(s), int(solution.get("knn", 0)),
-                           op)["labels"] for s in seeds if int(s) != solution["seed"]]
-    agree = [azimuth.agreement_up_to_offset(r, labels, V)[0] for r in others]
+    orders, agree_fn = _orders_and_agreement(solution, V)
+    others = [solve_labels_with_symmetry(C, solution["solver"], float(solution["sigma"]), int(s),
+                                         int(solution.get("knn", 0)), orders, op)
+              for s in seeds if int(s) != solution["seed"]]
+    agree = [agree_fn(r, labels) for r in others]
     return {"min": float(min(agree)) if agree else 1.0, "mean": float(np.mean(agree)) if agree else 1.0,
             "n_seeds": len(others) + 1}
 
 
 def equivariance(C: np.ndarray, solution: dict, shift_seed: int) -> float:
-    """Shift every shape's views by a known random offset, solve again: fraction whose label moved by it."""
+    """Shift every shape's views by a known random offset, solve again: fraction whose label moved by it
+    (modulo each shape's symmetry when some are symmetric; shifting views keeps every C_ii, so the orders)."""
     N, _, V = C.shape
     shifts = np.random.default_rng(shift_seed).integers(0, V, N)
-    shifted = solve_labels(shift_costs(C, shifts), solution["solver"], float(solution["sigma"]),
-                           int(solution["seed"]), int(solution.get("knn", 0)))["labels"]
-    return float(azimuth.agreement_up_to_offset(shifted, (np.asarray(solution["labels"]) + shifts) % V, V)[0])
+    orders, agree_fn = _orders_and_agreement(solution, V)
+    shifted = solve_labels_with_symmetry(shift_costs(C, shifts), solution["solver"], float(solution["sigma"]),
+                                         int(solution["seed"]), int(solution.get("knn", 0)), orders)
+    return float(agree_fn(shifted, (np.asarray(solution["labels"]) + shifts) % V))
 
 
 def solver_quality(C: np.ndarray, solution: dict, peer_labels: dict, restarts: int, seed: int,
@@ -107,8 +124,12 @@ def ground_truth_agreement(names: list[str], labels: np.ndarray, truth: dict[str
 
     orders (N,) int symmetry orders (None = all 1): when some shape is symmetric, exact / within-one-view are
     counted modulo each shape's symmetry (``agreement_modulo``). With angles_deg (N,) and truth_deg
-    {name: degrees}: the continuous error (``continuous_error``) as mean_error_deg, max_error_deg, and the
-    mean error of the labels' own angles (labels_mean_error_deg) for comparison.
+    {name: degrees}: the continuous error (``continuous_error``) as mean_error_deg, max_error_deg (and the
+    global offset_deg: angles ~= truth + offset), the
+    mean error of the labels' own angles (labels_mean_error_deg) for comparison, and nearest_view_exact: the
+    fraction of labels equal to the nearest view of the true azimuth turned into the solution's frame by the
+    continuous offset (with continuous truths "exact" depends on where a whole-step offset puts the rounding
+    cuts; this does not).
     """
     common = [i for i, n in enumerate(names) if n in truth]
     steps = np.array([truth[names[i]] for i in common])
@@ -129,8 +150,12 @@ def ground_truth_agreement(names: list[str], labels: np.ndarray, truth: dict[str
         true = np.array([truth_deg[names[i]] for i in both])
         kk = None if orders is None else np.asarray(orders)[both]
         cont = continuous_error(np.asarray(angles_deg)[both], true, kk)
+        nearest = np.rint((true + cont["offset_deg"]) * V / 360.0).astype(np.int64) % V  # in the solution's frame
+        kp = np.ones(len(both)) * V if kk is None else np.where(kk > 0, V / np.maximum(kk, 1), 0.0)
+        d = _periodic_distance(labels[both].astype(np.float64) - nearest, kp)
         out.update(mean_error_deg=cont["mean_error_deg"], max_error_deg=cont["max_error_deg"],
-                   labels_mean_error_deg=continuous_error(labels[both] * 360.0 / V, true, kk)["mean_error_deg"])
+                   offset_deg=cont["offset_deg"], labels_mean_error_deg=continuous_error(labels[both] * 360.0 / V, true, kk)["mean_error_deg"],
+                   nearest_view_exact=float(np.mean(d < 1e-9)) if both else 1.0)
     return out
 
 

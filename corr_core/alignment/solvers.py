@@ -7,6 +7,10 @@ The MRF (conventions in ``corr_core.alignment.pair_costs``): pairwise W_ij(t1, t
 - ``"lh"``: Leordeanu & Hebert's spectral relaxation + climbing (``corr_core.mrf.solve_lh``);
 - ``"spectral"``: angular synchronization (``corr_core.alignment.sync.spectral_sync_operator``);
 - ``"ppm"``: Chen & Candes' projected power method (``corr_core.alignment.sync.projected_power``).
+
+``solve_alignment`` also detects each shape's rotational symmetry (``corr_core.alignment.symmetry``; symmetric
+shapes are placed without steering the others) and refines the labels to continuous angles
+(``corr_core.alignment.continuous``).
 """
 from __future__ import annotations
 
@@ -17,7 +21,8 @@ from corr_core.alignment import continuous, symmetry, sync
 from corr_core.alignment.circulant import CirculantPairwise
 from corr_core.alignment.pair_costs import auto_sigma, nearest_shapes
 
-__all__ = ["SOLVERS", "uniform_unary", "choose_sigma", "knn_neighbors", "solve_labels", "solve_alignment",
+__all__ = ["SOLVERS", "uniform_unary", "choose_sigma", "knn_neighbors", "solve_labels", "solve_labels_with_symmetry",
+           "solve_alignment",
            "solution_angles_deg"]
 
 SOLVERS = ("lh", "spectral", "ppm")
@@ -71,6 +76,17 @@ def solve_labels(C: np.ndarray, solver: str, sigma: float, seed: int, knn: int =
     return out
 
 
+def solve_labels_with_symmetry(C: np.ndarray, solver: str, sigma: float, seed: int, knn: int,
+                               orders: np.ndarray | None, op: CirculantPairwise | None = None) -> np.ndarray:
+    """Labels (N,) int as ``solve_alignment`` makes them for known symmetry orders (N,) int: ``solve_labels``
+    when no shape is symmetric (orders None or all 1; op: its operator, if built), else
+    ``symmetry.place_symmetric`` around the same solver."""
+    if orders is None or np.all(np.asarray(orders) == 1):
+        return solve_labels(C, solver, sigma, seed, knn, op)["labels"]
+    return symmetry.place_symmetric(C, np.asarray(orders),
+                                    lambda Cw: solve_labels(Cw, solver, sigma, seed, knn)["labels"], sigma)
+
+
 def solve_alignment(C: np.ndarray, solver: str = "lh", sigma: float | str = "auto", sigma_scale: float = 1.0,
                     seed: int = 0, knn: int = 0, symmetric: bool = True) -> dict:
     """Joint alignment of N shapes from pair costs C: (N, N, V) (float32 is kept: no float64 copy).
@@ -92,9 +108,9 @@ def solve_alignment(C: np.ndarray, solver: str = "lh", sigma: float | str = "aut
         raise ValueError("pair costs contain NaN: a shape's features are broken")
     s = choose_sigma(C, sigma, sigma_scale)
     N, _, V = C.shape
-    orders = symmetry.symmetry_orders(C, s / sigma_scale) if symmetric else np.ones(N, np.int64)
+    orders = symmetry.symmetry_orders(C) if symmetric else np.ones(N, np.int64)  # scale: auto_sigma(C)
     if np.any(orders != 1):
-        labels = symmetry.place_symmetric(C, orders, lambda Cw: solve_labels(Cw, solver, s, seed, knn)["labels"], s)
+        labels = solve_labels_with_symmetry(C, solver, s, seed, knn, orders)
         op = CirculantPairwise(C, s, knn_neighbors(C, knn))
         out = {"labels": labels, "energy": float(mrf.energy(op, uniform_unary(N, V, seed), labels))}
     else:

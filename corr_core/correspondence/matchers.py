@@ -84,11 +84,23 @@ def mobius_inputs(flat: dict, area: float, sparse: np.ndarray, metric: str = "su
             "lam_sparse": flat["lam"][L[sparse]] * h if surface else None}
 
 
+def _measured_vertices(template_V: np.ndarray, template_flat: dict, target_flat: dict, n_points: int) -> np.ndarray:
+    """(n_points,) int farthest-point template vertices among those on both flattened surfaces."""
+    on_both = np.intersect1d(np.unique(template_flat["edges"]), np.unique(target_flat["edges"]))
+    if len(on_both) == len(template_V):
+        return farthest_point_samples(template_V, n_points)
+    return on_both[farthest_point_samples(np.asarray(template_V)[on_both], min(n_points, len(on_both)))]
+
+
 def dense_map_errors(best_map: dict, template_flat: dict, target_flat: dict, template_V: np.ndarray,
                      target_V: np.ndarray, target_F: np.ndarray, n_points: int, metric: str = "plane") -> np.ndarray:
     """Geodesic errors / sqrt(area) (n_points,) of the dense map of one Möbius map, measured on ``n_points``
-    farthest-point template vertices with the truth "vertex i <-> vertex i" (same connectivity required)."""
-    src_vertices = farthest_point_samples(template_V, n_points)
+    farthest-point template vertices with the truth "vertex i <-> vertex i" (same connectivity required).
+
+    Only vertices on both flattened surfaces (the kept components, see ``flattening_features``) are measured;
+    the predicted images are always target vertices of the target's kept component.
+    """
+    src_vertices = _measured_vertices(template_V, template_flat, target_flat, n_points)
     src_eids = np.array([vertex_to_edge(int(v), template_flat["edges"]) for v in src_vertices])
     nn = mobius.dense_map(best_map, _complex(template_flat)[src_eids], _complex(target_flat), metric=metric)
     return geodesic_errors(target_V, target_F, target_flat["edges"][nn, 0], src_vertices)

@@ -65,7 +65,8 @@ def box(center, half, R=None, k: int = 2, welded: bool = True) -> tuple[np.ndarr
 
 def cylinder(a, b, radius: float, segments: int = 12, rings: int = 1, radius_b: float | None = None,
              ) -> tuple[np.ndarray, np.ndarray]:
-    """Capped (possibly tapered) cylinder from point a (3,) to point b (3,). Returns V: (n,3), F: (m,3)."""
+    """Capped (possibly tapered) cylinder from point a (3,) to point b (3,). Returns V: (n,3), F: (m,3),
+    outward-oriented (sides and caps)."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     axis = b - a
     length = np.linalg.norm(axis)
@@ -85,8 +86,9 @@ def cylinder(a, b, radius: float, segments: int = 12, rings: int = 1, radius_b: 
     i, j = np.meshgrid(np.arange(rings), np.arange(segments), indexing="ij")
     p = i * segments + j
     q = i * segments + (j + 1) % segments
-    side = np.concatenate([np.stack([p, p + segments, q + segments], -1).reshape(-1, 3),
-                           np.stack([p, q + segments, q], -1).reshape(-1, 3)])
+    # counter-clockwise seen from outside (theta grows counter-clockwise about the axis): normals point outward
+    side = np.concatenate([np.stack([p, q + segments, p + segments], -1).reshape(-1, 3),
+                           np.stack([p, q, q + segments], -1).reshape(-1, 3)])
     j = np.arange(segments)
     cap_a = np.stack([np.full(segments, ca), (j + 1) % segments, j], 1)
     top = rings * segments

@@ -7,10 +7,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from corr_core.geometry.intrinsic import IntrinsicMesh
+
 
 class GeodesicSolver:
     """Heat-method geodesic distances on one mesh (potpourri3d's ``MeshHeatMethodDistanceSolver``): the mesh is
     factorized once, then each source costs two back-substitutions and one Poisson solve.
+
+    The solver works on the largest connected component of the referenced vertices (``IntrinsicMesh``); ids in
+    and out are the original vertex ids, and vertices outside that component are at distance NaN (a source
+    there raises ``OutsideComponentError``).
 
     V: (n,3) float; F: (m,3) int; t_coef: heat time as a multiple of the mean edge length squared.
     """
@@ -19,12 +25,15 @@ class GeodesicSolver:
         import potpourri3d as pp3d
 
         self.n_vertices = len(V)
+        self.surface = IntrinsicMesh(V, F)
         self._heat = pp3d.MeshHeatMethodDistanceSolver(
-            np.ascontiguousarray(V, dtype=np.float64), np.ascontiguousarray(F, dtype=np.int64), t_coef=t_coef)
+            np.ascontiguousarray(self.surface.V, dtype=np.float64),
+            np.ascontiguousarray(self.surface.F, dtype=np.int64), t_coef=t_coef)
 
     def distance(self, source: int) -> np.ndarray:
-        """(n,) float distance from vertex ``source`` to every vertex, length units of V."""
-        return self._heat.compute_distance(int(source))
+        """(n,) float distance from vertex ``source`` to every vertex, length units of V (NaN off the surface)."""
+        local = int(self.surface.to_sub([int(source)], what="source vertex")[0])
+        return self.surface.to_full(self._heat.compute_distance(local))
 
     def distances(self, sources) -> np.ndarray:
         """(s, n) float distances from each of the (s,) int source vertices to every vertex."""
@@ -41,12 +50,15 @@ class GeodesicSolver:
         """Approximate geodesic diameter by repeated double sweeps (farthest point from a vertex, then from it).
 
         Each sweep can only raise the estimate; it is a lower bound of the true diameter that is usually tight
-        on elongated shapes (humans: toe to fingertip / head). rounds: number of sweeps; start: first vertex.
+        on elongated shapes (humans: toe to fingertip / head). rounds: number of sweeps; start: first vertex (the
+        surface's first vertex when ``start`` is off it).
         """
         v, best = int(start), 0.0
+        if not self.surface.contains([v])[0]:
+            v = int(self.surface.vids[0])  # the first vertex of the surface
         for _ in range(max(1, rounds)):
             d = self.distance(v)
-            far = int(np.argmax(d))
+            far = int(np.nanargmax(d))
             if d[far] <= best:
                 break
             best, v = float(d[far]), far

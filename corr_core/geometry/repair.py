@@ -201,11 +201,12 @@ def _components(V: np.ndarray, F: np.ndarray, keep_largest: bool, name: str, rec
                                f"{len(present)} connected components (all kept)"))
         return F
     keep = face_label == best
-    n_lost = len(np.setdiff1d(np.unique(F[~keep]), np.unique(F[keep])))
+    n_used, n_kept = len(np.unique(F)), len(np.unique(F[keep]))
     records.append(_record(name, "components", "dropped", len(present) - 1, "repair",
-                           f"kept the largest of {len(present)} connected components ({area[best] / area.sum():.1%} "
-                           f"of the area); dropped {int((~keep).sum())} face(s), {n_lost} vertex/vertices are now "
-                           "unreferenced (vertex ids unchanged)"))
+                           f"kept the largest of {len(present)} components: {n_kept:,} of {n_used:,} vertices; "
+                           f"{n_used - n_kept:,} vertices in {len(present) - 1} small piece(s) ignored "
+                           f"({int((~keep).sum()):,} face(s), {1 - area[best] / area.sum():.2%} of the area; vertex "
+                           "ids unchanged)"))
     return F[keep]
 
 
@@ -238,9 +239,9 @@ def repair_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", *, keep_larges
 
     Steps, each reported when it finds something: drop faces repeating a vertex; drop duplicate faces (same
     three vertices in either orientation; the first is kept); drop zero-area faces; orient faces consistently
-    (``orient``); report remaining non-manifold edges; keep only the largest connected component by area
-    (``keep_largest_component``, for intrinsic methods) or report the components; report unreferenced vertices
-    and boundary loops.
+    (``orient``); report remaining non-manifold edges and the vertices no face uses; keep only the largest
+    connected component by area (``keep_largest_component``, for intrinsic methods: the record counts the vertices
+    of the pieces left out) or report the components; report boundary loops.
 
     Args:
         V: (n,3) float vertex positions; F: (m,3) int faces; name: the file, for messages.
@@ -268,8 +269,8 @@ def repair_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", *, keep_larges
     if orient:
         F = _orient(F, name, records)
     _report_non_manifold(F, name, records)
+    _report_unreferenced(len(V), F, name, records)  # used by no face of the file (dropped pieces: see components)
     F = _components(V, F, keep_largest_component, name, records)
-    _report_unreferenced(len(V), F, name, records)
     _report_boundary(F, name, records)
     return F, records
 

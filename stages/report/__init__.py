@@ -4,11 +4,15 @@
 the recorded sweeps and the published output folder); it runs no stage and writes only the report file.
 Images are embedded as base64 data URIs and the CSS is inline, so the file can be mailed or archived on its own.
 
-Figures are grouped into sections by the ``group`` each stage function was registered with; the titles of
-the groups come from the plugins (see :class:`stages.registry.Plugin`).
+The page opens on a summary: what ran on which data (and what came from the cache), then the headline tables
+the plugins declare (:class:`stages.registry.Headline`: methods x measures, the best value starred) next to
+the figures that carry the result. Everything else follows, folded: figures are grouped into sections by the
+``group`` each stage function was registered with (titles from the plugins, see
+:class:`stages.registry.Plugin`); each image is embedded once (elsewhere a pointer to it).
 
-Modules: ``markup`` (HTML building blocks and value rendering), ``context`` (gathering), ``sections``
-(summary, figures, metrics, sweeps), ``provenance`` (stages, code, versions, git).
+Modules: ``markup`` (HTML building blocks and value rendering), ``context`` (gathering), ``headline`` (the
+summary tables, shared with ``sweep``), ``sections`` (summary, figures, metrics, sweeps), ``provenance``
+(stages, code, versions, git).
 """
 from __future__ import annotations
 

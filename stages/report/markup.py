@@ -28,7 +28,8 @@ th,td{border:1px solid #ccd;padding:.2em .6em;text-align:left;vertical-align:top
 th{background:#eef}td.num{text-align:right;font-variant-numeric:tabular-nums}
 tr:nth-child(even) td{background:#fafafd}
 .note{background:#fff8e0;border-left:4px solid #e0b000;padding:.5em 1em;margin:1em 0}
-.bad{color:#b00}.muted{color:#777}
+.bad{color:#b00}.muted{color:#777}#summary .note{padding:.25em .8em;margin:.35em 0;font-size:.88em}
+#summary p.bad{margin:.3em 0;font-size:.9em}
 .figs{display:flex;flex-wrap:wrap;gap:1em;align-items:flex-start}
 figure{margin:0;border:1px solid #dde;padding:.5em;max-width:100%;background:#fff}
 figure img{max-width:100%;max-height:720px;display:block}
@@ -41,7 +42,8 @@ nav li{display:inline;margin-right:1.1em}
 .ptable{flex:0 0 auto;max-width:44%}.ptable h3{margin:.1em 0 .3em 0;font-size:1em}
 .pfigs{display:flex;gap:.6em;flex:1 1 auto;justify-content:flex-start;min-width:0}
 figure.thumb{padding:.2em;flex:0 1 auto;min-width:0}figure.thumb img{max-height:290px;max-width:100%}
-figure.thumb figcaption{font-size:.75em;margin-top:.1em;overflow-wrap:anywhere}figure.pointer{border-style:dashed;color:#555}
+figure.thumb figcaption{font-size:.75em;margin-top:.1em;overflow-wrap:anywhere}
+figure.pointer{border-style:dashed;color:#555}
 table.summary-table{font-size:.86em;margin:.2em 0}table.summary-table td,table.summary-table th{padding:.12em .45em}
 td.best{font-weight:bold;color:#064;background:#e6f5ea !important}
 """

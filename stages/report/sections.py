@@ -89,6 +89,11 @@ def summary_section(ctx: ReportContext) -> str:
                      "from that last run; metrics and cache counts below are for this configuration.</p>")
     if "_not_computed" in m:
         parts.append(f'<p class="bad">Metrics not computed yet: {esc(", ".join(m["_not_computed"]))}.</p>')
+    for stage, items in m.get("_left_out", {}).items():  # computed without items that failed upstream
+        parts.append(f'<p class="bad">{esc(stage)} left out {len(items)} failed item(s): '
+                     + esc("; ".join(f"{x['item']}: {x['why']}" for x in items[:20])) + ".</p>")
+    for stage, why in m.get("_skipped", {}).items():
+        parts.append(f'<p class="note">{esc(stage)} skipped: {esc(why)}.</p>')
     parts += [_headline_block(ctx, t) for t in ctx.headlines]
     rows = [["pipeline", plan.pipeline.name], ["file", plan.pipeline.file],
             ["overrides", " ".join(ctx.overrides) or "(none)"], ["output folder", plan.pipeline.output_dir],

@@ -94,6 +94,45 @@ def test_chairs_valid_varied_and_fronted():
     assert 500 <= min(tris) and max(tris) <= 3000
 
 
+def _signed_volume(V: np.ndarray, F: np.ndarray) -> float:
+    """Volume enclosed by a closed triangle mesh, positive when its faces point outward."""
+    return float(np.einsum("ij,ij->i", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]])).sum() / 6.0)
+
+
+def test_cylinder_side_and_cap_normals_point_outward():
+    a, b = np.array([0.1, -0.2, 0.3]), np.array([0.4, 0.5, -0.1])
+    V, F = C.cylinder(a, b, 0.05, segments=10, rings=3, radius_b=0.07)
+    w = (b - a) / np.linalg.norm(b - a)
+    normal = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    centre = V[F].mean(axis=1)
+    along = (centre - a) @ w
+    radial = centre - a - along[:, None] * w
+    side = (along > 1e-9) & (along < np.linalg.norm(b - a) - 1e-9)
+    cap_a, cap_b = np.abs(along) < 1e-9, np.abs(along - np.linalg.norm(b - a)) < 1e-9
+    assert side.sum() == 2 * 3 * 10 and cap_a.sum() == 10 and cap_b.sum() == 10
+    assert np.all(np.einsum("ij,ij->i", normal[side], radial[side]) > 0)
+    assert np.all(normal[cap_a] @ w < 0) and np.all(normal[cap_b] @ w > 0)
+
+
+def test_every_generated_chair_part_is_consistently_outward_oriented(monkeypatch):
+    """Each part (box, cylinder) of the generated chairs is closed once welded, needs no face flipped for a
+    consistent orientation and encloses a positive volume (faces point outward)."""
+    from corr_core.geometry.repair import orient_faces
+
+    parts = []
+    for maker in ("box", "cylinder"):
+        make = getattr(C, maker)
+        monkeypatch.setattr(C, maker, lambda *a, _make=make, **kw: parts.append(_make(*a, **kw)) or parts[-1])
+    for i in (1, 2, 3, 4, 5, 6, 7, 8, 18):
+        parts.clear()
+        C.canonical_chair(0, i)
+        assert parts, i
+        for k, (V, F) in enumerate(parts):
+            Vw, Fw = C.weld(V, F)
+            assert orient_faces(Fw)[1] == 0, (i, k)
+            assert _signed_volume(Vw, Fw) > 0, (i, k)
+
+
 def test_pedestal_chair_has_star_base():
     V, _ = C.make_chair(np.random.default_rng(3), kind="pedestal")
     low = V[V[:, 1] < V[:, 1].min() + 0.03]

@@ -81,3 +81,16 @@ def test_azimuth_figure(tmp_path):
     assert out["figures"] == ["azimuth_recovered_vs_true.png"] and out["exact"] == 0.75   # d is off
     assert (tmp_path / "azimuth_recovered_vs_true.png").stat().st_size > 1000
     assert figures.azimuth_figure(solution, None, out_dir=str(tmp_path)) == {"figures": []}
+
+
+def test_stand_up_turns_the_longest_axis_up():
+    V = np.random.default_rng(1).normal(size=(50, 3)) * [5.0, 1.0, 2.0]     # long along x
+    axis = pm.up_axis(V)
+    U = pm.stand_up(V, axis)
+    assert axis == 0 and pm.up_axis(U) == 1
+    assert np.allclose(np.linalg.norm(U, axis=1), np.linalg.norm(V, axis=1))   # a rotation: lengths kept
+    assert np.allclose(pm.stand_up(V * [1, 1, 1], 1), V)
+    W = V[:, [1, 2, 0]]                                                         # long along z
+    assert pm.up_axis(W) == 2 and pm.up_axis(pm.stand_up(W, 2)) == 1
+    M = np.stack([pm.stand_up(np.eye(3), a) for a in (0, 2)])
+    assert np.allclose([np.linalg.det(m) for m in M], 1.0)                      # proper rotations

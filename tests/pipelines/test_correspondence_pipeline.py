@@ -15,6 +15,7 @@ from corr_core.generate.humanoid import write_humanoid_dataset
 from corr_core.correspondence.landmarks import read_landmarks
 from corr_core.geometry.checks import check_correspondence_mesh
 from corr_core.geometry.mesh_io import load_mesh, save_obj
+from shapecorr.correspondence import mesh as corr_mesh
 from stages import api
 
 from tests.helpers import COURSE_DATA
@@ -289,9 +290,13 @@ def test_bad_meshes_fail_by_name_and_the_others_are_kept(tmp_path, humanoid, das
     p.run()
     test_dir = tmp_path / "humans" / "meshes" / "test"
     V, F = load_mesh(test_dir / "mesh001.obj")
-    bad = {"bad_components": (_two_components(V, F), "2 connected components")}
-    # repaired on load (a fin is kept with a warning, zero-area faces are dropped): these items run
-    repairable = {"bad_nonmanifold": _nonmanifold(V, F), "bad_degenerate": _degenerate(V, F)}
+    V_nan = V.copy()
+    V_nan[F[0, 0]] = np.nan
+    bad = {"bad_nan": ((V_nan, F), "NaN or infinite coordinate")}
+    # repaired on load (a fin is kept with a warning, zero-area faces are dropped, the largest component is
+    # kept for the intrinsic methods): these items run
+    repairable = {"bad_nonmanifold": _nonmanifold(V, F), "bad_degenerate": _degenerate(V, F),
+                  "bad_components": _two_components(V, F)}
     for name, (Vb, Fb) in {**{k: v for k, (v, _) in bad.items()}, **repairable}.items():
         save_obj(test_dir / f"{name}.obj", Vb, Fb)
     with pytest.raises(api.RunFailed) as info:
@@ -303,7 +308,7 @@ def test_bad_meshes_fail_by_name_and_the_others_are_kept(tmp_path, humanoid, das
         assert failures[name]["stage"] == "mesh"
         assert f"{name}.obj" in failures[name]["error"] and problem in failures[name]["error"]
     st = s["stages"]
-    assert st["mesh"]["failed"] == 1 and st["mesh"]["cached"] == N_POSES + 1 and st["mesh"]["executed"] == 2
+    assert st["mesh"]["failed"] == 1 and st["mesh"]["cached"] == N_POSES + 1 and st["mesh"]["executed"] == 3
     for name in ("spectral", "geodesics", "flatten"):
         assert st[name]["cached"] == N_POSES + 1 and st[name]["skipped"] == 1, name
     for name in ("descriptor", "mrf", "mrf_oriented", "mobius"):
@@ -313,6 +318,83 @@ def test_bad_meshes_fail_by_name_and_the_others_are_kept(tmp_path, humanoid, das
         (test_dir / f"{name}.obj").unlink()
     s = p.run()
     assert sum(_executed(s).values()) == 0
+
+
+N_UNUSED = 10
+
+
+def _loose_piece_and_unused_vertices(V, F):
+    """The mesh with 10 unreferenced vertices spread among the ids (far away) and a small closed tetrahedron
+    appended (a loose piece). Returns V2, F2 and new_id: (n,) int id in V2 of each original vertex."""
+    n = len(V)
+    unused_at = np.linspace(0, n, N_UNUSED, endpoint=False).astype(np.int64)  # before original vertex unused_at
+    new_id = np.arange(n) + np.searchsorted(unused_at, np.arange(n), side="right")
+    V2 = np.full((n + N_UNUSED, 3), 50.0)
+    V2[new_id] = V
+    T = V.max(axis=0) + np.array([[0.3, 0, 0], [0.35, 0, 0], [0.3, 0.05, 0], [0.3, 0, 0.05]])
+    tets = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]) + len(V2)
+    return np.concatenate([V2, T]), np.concatenate([new_id[F], tets]), new_id
+
+
+def _remap_landmark_file(path: Path, new_id: np.ndarray) -> None:
+    lines = [ln.split(",", 1) for ln in path.read_text().splitlines() if ln.strip()]
+    path.write_text("".join(f"{new_id[int(v)]},{name}\n" for v, name in lines))
+
+
+def _dirty_copy(tmp_path, humanoid) -> tuple[Path, np.ndarray]:
+    """A copy of the dataset where every mesh has a loose piece and unused vertices (landmarks renumbered)."""
+    data = tmp_path / "humans"
+    shutil.copytree(humanoid["data"], data)
+    for path in sorted((data / "meshes").glob("*/*.obj")):
+        V2, F2, new_id = _loose_piece_and_unused_vertices(*load_mesh(path))
+        save_obj(path, V2, F2)
+    for name in ("landmark_vids.txt", "sparse_landmark_vids.txt"):
+        _remap_landmark_file(data / name, new_id)
+    return data, new_id
+
+
+def test_loose_piece_and_unused_vertices_give_the_clean_results(tmp_path, humanoid, dask_client):
+    """Every method runs on the largest component, in the original vertex ids: the same landmark predictions,
+    accuracies and dense-map errors as on the clean meshes."""
+    (tmp_path / "clean").mkdir()
+    clean = _project(tmp_path / "clean", humanoid, dask_client)
+    clean.run()
+    data, _ = _dirty_copy(tmp_path, humanoid)
+    dirty = Project(tmp_path, data, humanoid["cache"], dask_client)
+    s = dirty.run()
+    assert not s["failures"] and s["stages"]["mesh"]["executed"] == N_POSES + 1
+    m, m0 = dirty.metrics(), clean.metrics()
+    assert set(m["accuracy"]) == set(METHODS) and "not_scored" not in m
+    assert m["accuracy"] == m0["accuracy"] and m["accuracy_per_mesh"] == m0["accuracy_per_mesh"]
+    corr = json.loads((dirty.out / "evaluate" / "correspondences.json").read_text())
+    corr0 = json.loads((clean.out / "evaluate" / "correspondences.json").read_text())
+    assert corr["matrices"] == corr0["matrices"]
+    assert m["dense_map"] == m0["dense_map"]
+    n = humanoid["info"]["n_vertices"]
+    with pytest.warns(UserWarning, match="kept the largest of 2 components"):
+        repairs = {r["kind"]: r for r in corr_mesh(str(data / "meshes" / "test" / "mesh001.obj"))["repairs"]}
+    assert f"kept the largest of 2 components: {n:,} of {n + 4:,} vertices; 4 vertices in 1 small piece(s) " \
+           "ignored" in repairs["components"]["message"]
+    assert repairs["unreferenced_vertices"]["count"] == N_UNUSED
+
+
+def test_landmark_on_a_loose_piece_fails_naming_the_landmark_and_the_file(tmp_path, humanoid, dask_client):
+    data, new_id = _dirty_copy(tmp_path, humanoid)
+    lm = data / "landmark_vids.txt"
+    lines = lm.read_text().splitlines()
+    name = lines[2].split(",", 1)[1]
+    loose_vertex = humanoid["info"]["n_vertices"] + N_UNUSED + 1  # a tetrahedron vertex
+    lines[2] = f"{loose_vertex},{name}"
+    lm.write_text("\n".join(lines) + "\n")
+    p = Project(tmp_path, data, humanoid["cache"], dask_client)
+    with pytest.raises(api.RunFailed) as info:
+        p.run()
+    s = info.value.summary
+    assert {(f["stage"], f["item"]) for f in s["failures"]} == {
+        (st, it) for st in ("spectral", "geodesics", "flatten") for it in ["mesh000"] + TESTS}
+    for f in s["failures"]:
+        assert f"landmark {name!r} (vertex {loose_vertex}) from landmark_vids.txt on {f['item']}.obj" in f["error"]
+        assert "largest connected component" in f["error"]
 
 
 # --------------------------------------------------------------------------------------------------------------

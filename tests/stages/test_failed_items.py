@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from stages import api
-from stages.plan import SourceKind, plan_pipeline
+from stages.plan import plan_pipeline
 
 from tests.helpers import COURSE_DATA, ROOT, cli, executed, make_project
 
@@ -51,6 +51,8 @@ def test_a_collection_runs_on_the_items_that_succeeded(project27, tmp_path):
     metrics_file = json.loads((tmp_path / "results" / "syn" / "metrics.json").read_text())
     assert metrics_file["_left_out"] == m["_left_out"]
     assert (tmp_path / "results" / "syn" / "rep" / "summary.txt").read_text().startswith("synthetic: 26 items")
+    html = Path(api.write_report(str(project27), sets)).read_text(encoding="utf-8")
+    assert f"summary left out 1 failed item(s): feat[{BROKEN}]" in html
 
 
 def test_a_rerun_retries_the_failed_item_only(project27):

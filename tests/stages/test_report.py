@@ -368,3 +368,20 @@ def test_best_indices_and_headline_marks():
     assert best_indices([0.5, 0.2], None) == set()
     assert best_indices([0.5, None], "max") == set()          # one value: nothing to compare
     assert best_indices([1.0, 1.0, 1.0], "max") == set()      # all equal: nothing to mark
+
+
+def test_report_results_folder_option(project, tmp_path):
+    """``report --results DIR`` shows the figures published to DIR (what ``run --out DIR`` was given)."""
+    import shutil
+    path = str(project)
+    api.run(path, workers=0, quiet=True)
+    shutil.move(str(tmp_path / "results" / "syn"), str(tmp_path / "elsewhere"))
+    env = plugins_env(PLUGIN)
+    env["PYTHONPATH"] += os.pathsep + str(tmp_path)
+    res = cli(["report", "p.yaml", "--out", "r.html"], cwd=tmp_path, env=env, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert parse(str(tmp_path / "r.html")).images == []            # the pipeline's own output folder is empty
+    res = cli(["report", "p.yaml", "--results", "elsewhere"], cwd=tmp_path, env=env, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == str(tmp_path / "elsewhere" / "report.html")
+    assert len(parse(res.stdout.strip()).images) == 2 + 2 * 6

@@ -4,14 +4,15 @@ From points (``map_from_points``): the geodesic distance to each given point, it
 exp(-(d / s)^2) and the pairwise *chirality functions* (``fmaps.chirality_functions``: the signed sine between the
 directions to two points; it flips sign on a mirror image, so belly/back and left/right are told apart) are
 corresponding functions on both meshes. A functional map fitted to them (descriptors + Laplacian
-commutativity, ``fmaps.fit_functional_map``) is refined by ZoomOut.
+commutativity, ``fmaps.fit_functional_map``; its orientation term is available but off by default: with these
+point-based descriptors it shrank the map and raised the error on SCAPE) is refined by ZoomOut.
 
 Automatic (``map_automatic``): feature points are detected on each mesh independently (``extremities``: local
 maxima of the average geodesic distance, i.e. hands, feet and head of a body), candidate assignments between the
 two sets are ranked by how well they preserve the geodesic distances between the points (which cannot tell
 left from right), and each of the best few is turned into a map by ``map_from_points``. Among the maps that keep
-the surface orientation (``orientation_agreement`` > 0: small triangles of samples keep their handedness; a
-mirror map reverses it), the one under which the heat kernel signatures agree best wins (``hks_disagreement``: it
+the surface orientation (``orientation_agreement`` > 0: the map's local linear part has a positive determinant in
+right-handed tangent frames; a mirror map's is negative), the one under which the heat kernel signatures agree best wins (``hks_disagreement``: it
 tells front from back, i.e. rejects the orientation-preserving 180-degree turn).
 """
 from __future__ import annotations
@@ -69,14 +70,17 @@ def fmap_from_points(source: MeshBasis, target: MeshBasis, points_source: np.nda
 
 
 def map_from_points(source: MeshBasis, target: MeshBasis, points_source, points_target, k_init: int = 40,
-                    k_end: int = 100, step: int = 5, features=None) -> tuple[np.ndarray, np.ndarray]:
+                    k_end: int = 100, step: int = 5, features=None,
+                    n_zoomout: int | None = 1000) -> tuple[np.ndarray, np.ndarray]:
     """Functional map from corresponding points, refined by ZoomOut on the samples.
 
+    ZoomOut iterates on the first ``n_zoomout`` samples of each mesh (None: all); the returned point map is
+    computed at all of them with the final functional map.
     Returns: C: (k_end, k_end) functional map, p2p_samples: (len(source.samples),) int target vertex of each
     template sample.
     """
     C = fmap_from_points(source, target, points_source, points_target, k=k_init, features=features)
-    C = zoomout.zoomout(source, target, C, k_end=k_end, step=step)
+    C = zoomout.zoomout(source, target, C, k_end=k_end, step=step, n_source=n_zoomout, n_target=n_zoomout)
     ks, kt = C.shape
     match = fmaps.p2p_from_fmap(C, source.evecs[source.samples, :ks], target.evecs[target.samples, :kt])
     return C, target.samples[match]
@@ -157,25 +161,36 @@ def ranked_assignments(D_source: np.ndarray, D_target: np.ndarray, keep: int = 6
     return results[:keep]
 
 
+def _tangent_frames(N: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit tangent vectors (p,3), (p,3) with (t1, t2, n) right-handed, for unit normals N (p,3)."""
+    helper = np.where(np.abs(N[:, :1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
+    t1 = np.cross(helper, N)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    return t1, np.cross(N, t1)
+
+
 def orientation_agreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarray,
-                          neighbours: tuple[int, int] = (3, 6)) -> float:
+                          neighbours: int = 16) -> float:
     """How much a map keeps the surface orientation, in [-1, 1] (+1: orientation-preserving, -1: a mirror map).
 
-    For every template sample s, the triangle (s, a, b) with a, b its ``neighbours``-th nearest samples (3D) has an
-    orientation sign det[a - s, b - s, n_s] (n: vertex normal); the map keeps it when the image triangle has the
-    same sign w.r.t. the target normal at the image of s. Returns the mean product of the two signs.
+    At every template sample, the map's local linear part is fitted (least squares) from the sample's
+    ``neighbours`` nearest samples (3D), both sides expressed in right-handed tangent frames (t1, t2, outward
+    normal); its determinant is positive when the map keeps the orientation. Returns the mean sign.
     """
     from corr_core.geometry.primitives import vertex_normals
 
     X = source.V[source.samples]
-    _, nb = cKDTree(X).query(X, k=max(neighbours) + 1)
-    a, b = nb[:, neighbours[0]], nb[:, neighbours[1]]
-    n_s = vertex_normals(source.V, source.F)[source.samples]
-    o_s = np.sign(np.einsum("ij,ij->i", np.cross(X[a] - X, X[b] - X), n_s))
-    Y = target.V[p2p_samples]
-    n_t = vertex_normals(target.V, target.F)[p2p_samples]
-    o_t = np.sign(np.einsum("ij,ij->i", np.cross(Y[a] - Y, Y[b] - Y), n_t))
-    return float(np.mean(o_s * o_t))
+    Y = target.V[np.asarray(p2p_samples)]
+    _, nb = cKDTree(X).query(X, k=min(neighbours + 1, len(X)))
+    nb = nb[:, 1:]
+    s1, s2 = _tangent_frames(vertex_normals(source.V, source.F)[source.samples])
+    r1, r2 = _tangent_frames(vertex_normals(target.V, target.F)[np.asarray(p2p_samples)])
+    P = X[nb] - X[:, None, :]                                           # (p, k, 3)
+    Q = Y[nb] - Y[:, None, :]
+    P2 = np.stack([np.einsum("pkc,pc->pk", P, s1), np.einsum("pkc,pc->pk", P, s2)], axis=2)   # (p, k, 2)
+    Q2 = np.stack([np.einsum("pkc,pc->pk", Q, r1), np.einsum("pkc,pc->pk", Q, r2)], axis=2)
+    # A = (P2^T P2)^-1 P2^T Q2; sign(det A) = sign(det(P2^T Q2)) because det(P2^T P2) > 0
+    return float(np.mean(np.sign(np.linalg.det(np.einsum("pki,pkj->pij", P2, Q2)))))
 
 
 def hks_disagreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarray, n_times: int = 16) -> float:
@@ -191,13 +206,14 @@ def hks_disagreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarr
 
 
 def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarray | None = None,
-                  points_target: np.ndarray | None = None, keep: int = 4, k_init: int = 40, k_end: int = 100,
-                  step: int = 5, return_info: bool = False):
+                  points_target: np.ndarray | None = None, keep: int = 4, k_init: int = 40, k_probe: int = 60,
+                  k_end: int = 100, step: int = 5, return_info: bool = False):
     """A map with no point given on the target (module docstring).
 
     Args:
         points_source, points_target: feature points of each mesh (default ``extremities`` of each).
-        keep: candidate assignments evaluated as full maps.
+        keep: candidate assignments evaluated as maps (ZoomOut up to ``k_probe``; the chosen one then goes on
+            to ``k_end``).
     Returns: (C, p2p_samples) as ``map_from_points``; with ``return_info`` also a dict (points, the chosen
         assignment, every candidate's cost and disagreement).
     """
@@ -210,8 +226,8 @@ def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarra
     for s, t, cost in candidates:
         FS = point_features(source, Ps[s], distances=Gs[s])
         FT = point_features(target, Pt[t], distances=Gt[t])
-        C, p2p = map_from_points(source, target, Ps[s], Pt[t], k_init=k_init, k_end=k_end, step=step,
-                                 features=(FS, FT))
+        C, p2p = map_from_points(source, target, Ps[s], Pt[t], k_init=k_init, k_end=min(k_probe, k_end),
+                                 step=step, features=(FS, FT))
         info["candidates"].append({"source": s, "target": t, "distortion": cost, "map": (C, p2p),
                                    "orientation": orientation_agreement(source, target, p2p),
                                    "hks": hks_disagreement(source, target, p2p)})
@@ -222,4 +238,9 @@ def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarra
     s, t = chosen["source"], chosen["target"]
     info["chosen"] = (Ps[s], Pt[t])
     C, p2p = chosen["map"]
+    if min(C.shape) < k_end:
+        C = zoomout.zoomout(source, target, C, k_end=k_end, step=step, n_source=1000, n_target=1000)
+        ks, kt = C.shape
+        p2p = target.samples[fmaps.p2p_from_fmap(C, source.evecs[source.samples, :ks],
+                                                 target.evecs[target.samples, :kt])]
     return (C, p2p, info) if return_info else (C, p2p)

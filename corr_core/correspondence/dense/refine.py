@@ -19,7 +19,7 @@ from corr_core.correspondence.dense.basis import MeshBasis
 
 
 def upsample_spectral(source: MeshBasis, target: MeshBasis, C: np.ndarray, p2p_samples: np.ndarray,
-                      n_candidates: int = 64) -> np.ndarray:
+                      n_candidates: int = 32) -> np.ndarray:
     """Point map of every template vertex from a map known at the template samples and a functional map.
 
     Each template vertex starts at the image of its nearest template sample (3D) and then takes, among the
@@ -38,8 +38,8 @@ def upsample_spectral(source: MeshBasis, target: MeshBasis, C: np.ndarray, p2p_s
     n_candidates = min(n_candidates, target.n)
     _, cands = cKDTree(target.V).query(target.V[start], k=n_candidates)   # (n_s, c)
     ks, kt = C.shape
-    emb_s = source.evecs[:, :ks] @ C                                     # (n_s, kt)
-    emb_t = target.evecs[:, :kt]
+    emb_s = (source.evecs[:, :ks] @ C).astype(np.float32)                # (n_s, kt)
+    emb_t = target.evecs[:, :kt].astype(np.float32)
     out = np.empty(source.n, dtype=np.int64)
     for s in range(0, source.n, 2048):                                   # chunks bound memory (c * kt each)
         c = cands[s:s + 2048]
@@ -110,7 +110,7 @@ def _kabsch_batch(X: np.ndarray, Y: np.ndarray, w: np.ndarray) -> tuple[np.ndarr
 
 
 def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, n_patches: int = 300,
-                     patch_size: int = 64, icp_iterations: int = 8, rounds: int = 6, trim: float = 2.0,
+                     patch_size: int = 64, icp_iterations: int = 6, rounds: int = 5, trim: float = 2.0,
                      n_candidates: int = 32) -> np.ndarray:
     """Local rigid alignment (patch-wise ICP) of the template onto the target, then nearest vertices.
 

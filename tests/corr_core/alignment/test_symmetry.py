@@ -1,6 +1,8 @@
 """Tests for corr_core.alignment.symmetry: orders read off C_ii, and symmetric shapes placed without steering
 the asymmetric ones (synthetic features and generated tables)."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -46,6 +48,13 @@ def test_symmetric_shapes_are_placed_modulo_their_symmetry(solver):
     assert agreement_modulo(sol["labels"], offsets, 16, symmetry_periods(orders, 16)) == 1.0
 
 
+def test_a_collection_without_asymmetric_shapes_is_synchronized_on_the_harmonic():
+    orders = np.array([2] * 6 + [4] * 6 + [0] * 3)
+    F, offsets = collection(list(orders), noise=0.5, seed=3)
+    sol = solve_alignment(pair_costs(F), solver="spectral")
+    assert agreement_modulo(sol["labels"], offsets, 16, symmetry_periods(orders, 16)) == 1.0
+
+
 def test_without_symmetry_handling_spectral_sync_loses_the_symmetric_shapes():
     """The first harmonic of a k-fold periodic kernel vanishes: the symmetric shapes' phases are noise."""
     orders = np.array([1] * 10 + [2] * 6 + [4] * 6)
@@ -74,7 +83,8 @@ def tables(tmp_path_factory):
 
     out = write_table_collection(tmp_path_factory.mktemp("tables") / "t", n=6, n_chairs=4, seed=1)
     files = [f"{out['out_dir']}/{n}.obj" for n in out["names"]]
-    with pytest.warns(UserWarning):  # repaired (flipped) faces of the generated boxes are reported
+    with warnings.catch_warnings():  # mesh repairs of the generated boxes may be reported
+        warnings.simplefilter("ignore", UserWarning)
         F = np.stack([hog(views([f], image_size=96)) for f in files])
     return pair_costs(F), out
 
@@ -87,3 +97,14 @@ def test_generated_tables_symmetry_is_detected_and_used(tables):
     assert sol["symmetry_order"].tolist() == out["symmetry_order"]
     err = continuous_error(sol["angles_deg"], np.array(out["azimuth_deg"]), np.array(out["symmetry_order"]))
     assert err["mean_error_deg"] <= 2.0 and err["n"] == 8
+
+
+def test_equivariance_and_seed_stability_use_the_symmetry_handling():
+    from corr_core.alignment.measures import equivariance, seed_stability
+
+    orders = np.array([1] * 10 + [2] * 6 + [4] * 6)
+    F, _ = collection(list(orders), noise=0.5, seed=2)
+    C = pair_costs(F)
+    sol = solve_alignment(C, solver="spectral")
+    assert equivariance(C, sol, shift_seed=4) == 1.0
+    assert seed_stability(C, sol, [0, 1, 2])["min"] == 1.0

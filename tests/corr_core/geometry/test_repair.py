@@ -122,7 +122,9 @@ def test_keep_largest_component_keeps_vertex_ids():
     kept, records = repair_mesh(V2, F2, "two.obj", keep_largest_component=True)
     np.testing.assert_array_equal(kept, F)
     kinds = _kinds(records)
-    assert kinds["components"]["action"] == "dropped" and kinds["unreferenced_vertices"]["count"] == 4
+    assert kinds["components"]["action"] == "dropped" and "unreferenced_vertices" not in kinds
+    assert (f"kept the largest of 2 components: {len(V)} of {len(V) + 4} vertices; 4 vertices in 1 small piece(s) "
+            "ignored") in kinds["components"]["message"]
     _, records = repair_mesh(V2, F2, "two.obj")
     assert _kinds(records)["components"]["level"] == "note"
 

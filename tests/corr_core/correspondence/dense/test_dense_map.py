@@ -14,7 +14,7 @@ from scipy.spatial import cKDTree
 from corr_core.correspondence.dense import dense_map, measures, mesh_basis, transfer_landmarks
 from corr_core.generate import humanoid
 
-K, K_INIT = 30, 20
+K, K_INIT, N_SAMPLES = 40, 20, 600
 FAST = {"extrinsic": {"n_patches": 120, "rounds": 4}}
 
 
@@ -28,7 +28,7 @@ def _with_belly(V, F, height: float = 0.06):
 
 
 def _basis(V, F):
-    return mesh_basis(V, F, k=K, n_samples=400)
+    return mesh_basis(V, F, k=K, n_samples=N_SAMPLES)
 
 
 @pytest.fixture(scope="module")
