@@ -141,3 +141,29 @@ def match_mobius(template_flat: dict, target_flat: dict, template_mesh: dict, ta
         out["dense_errors"] = dense_map_errors(maps[0], template_flat, target_flat, Vs, Vt, Ft, dense_points,
                                                ext_metric)
     return out
+
+
+def mobius_vertex_map(template_flat: dict, target_flat: dict, template_area: float, target_area: float,
+                      n_template: int, sparse: np.ndarray, K: float = 0.5, metric: str = "surface",
+                      K_scale: float = 0.3, power: float = 4.0) -> np.ndarray:
+    """The dense map of Möbius voting's best map (the vote of ``match_mobius``) for every template vertex.
+
+    template_flat, target_flat: ``flattening_features`` dicts; *_area: surface areas; sparse: (k,) positions of
+    the sparse landmarks in the landmark list. Each template vertex maps through its first edge midpoint to the
+    nearest target midpoint, then to that edge's first vertex. Returns (n_template,) int target vertex ids; -1
+    for template vertices on no flattened edge (off the kept component, or used by no face).
+    """
+    s = mobius_inputs(template_flat, template_area, sparse, metric)
+    t = mobius_inputs(target_flat, target_area, sparse, metric)
+    surface = metric == "surface"
+    res = mobius.mobius_vote_landmarks(s["samples"], t["samples"], s["sparse"], t["sparse"], K=K, metric=metric,
+                                       lam_samples=(s["lam_samples"], t["lam_samples"]) if surface else None,
+                                       lam_landmarks=(s["lam_sparse"], t["lam_sparse"]) if surface else None,
+                                       power=power, K_scale=K_scale if surface else None)
+    best = (res["consensus_maps"] or res["best_maps"])[0]
+    on_surface = np.unique(template_flat["edges"])
+    nn = mobius.dense_map(best, s["Z"][vertex_to_edge(on_surface, template_flat["edges"])], t["Z"],
+                          metric="plane" if surface else metric)
+    out = np.full(int(n_template), -1, np.int64)
+    out[on_surface] = target_flat["edges"][nn, 0]
+    return out

@@ -130,3 +130,20 @@ def scorable_results(results: dict) -> tuple[dict, dict[str, str]]:
     """Split per-mesh method results {mesh: {..., "no_truth": reason?}} into (scorable, {mesh: reason})."""
     skipped = {m: r["no_truth"] for m, r in sorted(results.items()) if r.get("no_truth")}
     return {m: r for m, r in results.items() if m not in skipped}, skipped
+
+
+def identity_euclidean_error(template_V: np.ndarray, target_V: np.ndarray, target_F: np.ndarray,
+                             vertex_map: np.ndarray) -> float | None:
+    """Mean Euclidean distance / sqrt(target area) between each template vertex's image and the same vertex id
+    on the target (the truth "vertex i <-> vertex i"), over template vertices with an image (``vertex_map`` >= 0).
+
+    template_V: (n,3); target_V: (n,3); target_F: (m,3); vertex_map: (n,) int. None when the vertex counts
+    differ (no such truth) or no vertex has an image.
+    """
+    target_V = np.asarray(target_V)
+    vertex_map = np.asarray(vertex_map, np.int64)
+    if len(target_V) != len(template_V) or not np.any(vertex_map >= 0):
+        return None
+    has = np.nonzero(vertex_map >= 0)[0]
+    dist = np.linalg.norm(target_V[vertex_map[has]] - target_V[has], axis=1)
+    return float(dist.mean() / np.sqrt(surface_area(target_V, target_F)))

@@ -30,6 +30,31 @@ class _Images(HTMLParser):
         self.text.append(data)
 
 
+README_BLOCK_START = "$ python -m stages results pipeline.yaml\n"
+
+
+def readme_results_lines(readme: str) -> list[tuple[str, str]]:
+    """(metric, value) pairs of the README's demo block: the lines after ``$ python -m stages results
+    pipeline.yaml`` up to the end of that code block, comments and ``...`` left out."""
+    block = readme.split(README_BLOCK_START, 1)[1].split("```", 1)[0]
+    rows = [line.split("#", 1)[0].split() for line in block.splitlines()]
+    return [(r[0], r[1]) for r in rows if len(r) == 2]
+
+
+def _readme_block_matches(results_text: str) -> None:
+    """Every metric the README's demo block shows has exactly that value in ``results pipeline.yaml``."""
+    printed = dict(tuple(r) for r in (line.split() for line in results_text.splitlines()) if len(r) == 2)
+    shown = readme_results_lines((ROOT / "README.md").read_text(encoding="utf-8"))
+    assert len(shown) >= 5, "the README's demo block lost its metrics"
+    for name, value in shown:
+        assert printed.get(name) == value, f"README says {name} {value}, results print {printed.get(name)}"
+
+
+def test_readme_block_parser_reads_metric_lines():
+    text = "x\n```\n" + README_BLOCK_START + "a.b   1    # note\nc  0.5\n...\n```\nd 3\n"
+    assert readme_results_lines(text) == [("a.b", "1"), ("c", "0.5")]
+
+
 def test_default_pipeline_and_report(tmp_path):
     shutil.copy(ROOT / "pipeline.yaml", tmp_path / "pipeline.yaml")
     res = cli(["run", "pipeline.yaml", "--summary-json", "s.json"], cwd=tmp_path, timeout=900)
@@ -37,6 +62,7 @@ def test_default_pipeline_and_report(tmp_path):
     summary = json.loads((tmp_path / "s.json").read_text())
     assert all(s["failed"] == 0 for s in summary["stages"].values())
     metrics = json.loads(cli(["results", "pipeline.yaml", "--json"], cwd=tmp_path).stdout)
+    _readme_block_matches(cli(["results", "pipeline.yaml"], cwd=tmp_path).stdout)
     # problem 1 against the generator's known azimuths, problem 2 against the generated landmarks
     assert metrics["ground_truth"]["exact"] == 1.0 and metrics["ground_truth"]["n"] == 24
     assert len(metrics["labels"]) == 24

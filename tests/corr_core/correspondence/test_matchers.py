@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from corr_core.correspondence.matchers import (descriptor_matrix, match_descriptors, match_geodesic_mrf,
+from corr_core.correspondence.matchers import (mobius_vertex_map, descriptor_matrix, match_descriptors, match_geodesic_mrf,
                                                match_mobius)
 from corr_core.correspondence.mesh_features import flattening_features, geodesic_features
 from corr_core.geometry.primitives import surface_area
@@ -61,3 +61,20 @@ def test_mobius_matching_with_dense_errors_and_skipped_dense_map():
     other = {**mesh, "F": F[::-1][:-1]}  # a face less: no vertex i <-> vertex i truth
     skipped = match_mobius(flat, flat, mesh, other, SPARSE, top=10, dense_points=30)
     assert "dense_errors" not in skipped and "same connectivity" in skipped["dense_skipped"]
+
+
+def test_mobius_vertex_map_of_a_surface_to_itself_and_with_stray_vertices():
+    V, F, lm = blob()
+    flat = flattening_features(V, F, lm, n_samples=80)
+    area = surface_area(V, F)
+    vm = mobius_vertex_map(flat, flat, area, area, len(V), SPARSE)
+    assert vm.shape == (len(V),) and vm.min() >= 0
+    # the identity up to the midpoint -> vertex rounding: each vertex lands on itself or a neighbour
+    edge = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
+    assert np.median(np.linalg.norm(V[vm] - V, axis=1)) <= 1.5 * edge
+    # two stray vertices used by no face (ids kept): no image for them, the others unchanged
+    V2 = np.vstack([V, [[9.0, 9.0, 9.0], [-9.0, 9.0, 9.0]]])
+    flat2 = flattening_features(V2, F, lm, n_samples=80)
+    vm2 = mobius_vertex_map(flat2, flat2, area, area, len(V2), SPARSE)
+    np.testing.assert_array_equal(vm2[-2:], [-1, -1])
+    np.testing.assert_array_equal(vm2[:-2], vm)

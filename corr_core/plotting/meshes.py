@@ -16,9 +16,11 @@ import numpy as np
 from corr_core._open3d import load_open3d
 from corr_core.alignment.render import camera_frames, view_rays
 from corr_core.geometry.primitives import face_normals
+from corr_core.plotting.charts import pyplot
 
 __all__ = ["up_axis", "stand_up", "normalise_for_picture", "render_colored", "project_vertices", "coordinate_colors",
-           "pull_back_colors", "crop_box", "plot_landmark_panels", "plot_dense_panels", "plot_azimuths"]
+           "pull_back_colors", "crop_box", "plot_landmark_panels", "plot_dense_panels", "plot_azimuths",
+           "spread_best_to_worst", "plot_landmark_methods", "plot_dense_methods"]
 
 MARGIN = 1.05
 
@@ -117,17 +119,20 @@ def coordinate_colors(V: np.ndarray) -> np.ndarray:
 def pull_back_colors(template_colors: np.ndarray, vertex_map: np.ndarray, target_V: np.ndarray) -> np.ndarray:
     """Colours of the target vertices through a dense map template vertex i -> target vertex ``vertex_map[i]``.
 
-    template_colors: (n_s,3); vertex_map: (n_s,) int target vertex ids; target_V: (n_t,3). A target vertex
-    some template vertices map to gets their mean colour; the others take the colour of the nearest such
-    vertex (in 3D). Returns (n_t,3) float.
+    template_colors: (n_s,3); vertex_map: (n_s,) int target vertex ids, -1 for a template vertex with no image
+    (left out); target_V: (n_t,3). A target vertex some template vertices map to gets their mean colour; the
+    others take the colour of the nearest such vertex (in 3D). Returns (n_t,3) float.
     """
     from scipy.spatial import cKDTree
 
     vertex_map = np.asarray(vertex_map, np.int64)
     n_t = len(target_V)
-    if vertex_map.shape != (len(template_colors),) or vertex_map.min() < 0 or vertex_map.max() >= n_t:
-        raise ValueError(f"vertex_map must be ({len(template_colors)},) ids in [0, {n_t}), got shape "
-                         f"{vertex_map.shape}")
+    if vertex_map.shape != (len(template_colors),) or vertex_map.max() < 0 or vertex_map.min() < -1 \
+            or vertex_map.max() >= n_t:
+        raise ValueError(f"vertex_map must be ({len(template_colors)},) ids in [0, {n_t}) or -1, with at least "
+                         f"one image; got shape {vertex_map.shape}")
+    has = vertex_map >= 0
+    template_colors, vertex_map = np.asarray(template_colors)[has], vertex_map[has]
     sums = np.zeros((n_t, 3))
     np.add.at(sums, vertex_map, template_colors)
     counts = np.bincount(vertex_map, minlength=n_t)
@@ -138,15 +143,6 @@ def pull_back_colors(template_colors: np.ndarray, vertex_map: np.ndarray, target
     if len(miss):
         out[miss] = out[hit[cKDTree(target_V[hit]).query(target_V[miss])[1]]]
     return out
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 GREY = np.array([0.78, 0.78, 0.80])
@@ -193,7 +189,7 @@ def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, pred
         legend: list the numbered landmark names on the right.
     Writes one PNG to ``path``.
     """
-    plt = _pyplot()
+    plt = pyplot()
     axis = up_axis(template[0])
     panels = []   # (name, row, image, xy, visible, right)
     for name, (V, F) in [("template", template)] + list(poses.items()):
@@ -250,7 +246,7 @@ def plot_dense_panels(template: tuple, poses: dict, vertex_maps: dict, captions:
         captions: {pose name: text under the pose's title} (e.g. its mean error).
     Writes one PNG to ``path``.
     """
-    plt = _pyplot()
+    plt = pyplot()
     Vt, Ft = template
     colors = coordinate_colors(normalise_for_picture(Vt))
     columns = [("template", Vt, Ft, colors)] + [(n, V, F, pull_back_colors(colors, vertex_maps[n], V))
@@ -279,7 +275,7 @@ def plot_azimuths(true_deg: np.ndarray, recovered_deg: np.ndarray, names: list[s
                   path) -> None:
     """Recovered (after the best global offset) against true azimuth, degrees, one dot per shape (n,);
     shapes off the diagonal by more than half a view step are red and named."""
-    plt = _pyplot()
+    plt = pyplot()
     true_deg, recovered_deg = np.asarray(true_deg, float), np.asarray(recovered_deg, float)
     diff = (recovered_deg - true_deg + 180.0) % 360.0 - 180.0
     wrong = np.abs(diff) > step_deg / 2
@@ -301,3 +297,73 @@ def plot_azimuths(true_deg: np.ndarray, recovered_deg: np.ndarray, names: list[s
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+# ------------------------------------------------------------------------------------ per-method figure sets
+def spread_best_to_worst(names_by_score: list[str], k: int = 4) -> list[str]:
+    """Up to ``k`` names from a best-to-worst list, evenly spaced: always the first (best) and the last (worst)."""
+    if len(names_by_score) <= k:
+        return list(names_by_score)
+    idx = np.unique(np.round(np.linspace(0, len(names_by_score) - 1, k)).astype(int))
+    return [names_by_score[i] for i in idx]
+
+
+def plot_landmark_methods(template: tuple, meshes: dict, landmark_vids: np.ndarray, names: list[str],
+                          methods: dict, out_dir: str, views: tuple[int, ...] = (0, 1), max_poses: int = 4,
+                          worst_file: str = "landmarks_worst_per_method.png") -> tuple[list[str], dict]:
+    """Per landmark method, the template and up to ``max_poses`` test poses (best .. worst by accuracy) with the
+    predicted landmarks as numbered dots (``landmarks_<method>.png``), and one picture of every method's worst pose
+    (``worst_file``, first camera only). The truth is landmark i -> landmark i, the same vertex ids on every mesh.
+
+    Args:
+        template: (V, F); meshes: {pose: (V, F)}; landmark_vids: (L,) int; names: (L,) landmark names.
+        methods: {method: {pose: (L,) predicted landmark index}} (poses with a truth only).
+    Returns (file names written, {method: [poses shown, best first]}).
+    """
+    figures, shown = [], {}
+    for method, preds in methods.items():
+        accuracy = {m: float(np.mean(p == np.arange(len(p)))) for m, p in preds.items()}
+        poses = spread_best_to_worst(sorted(preds, key=lambda m: (-accuracy[m], m)), max_poses)
+        file = f"landmarks_{method}.png"
+        mean = float(np.mean(list(accuracy.values())))
+        plot_landmark_panels(template, {m: meshes[m] for m in poses},
+                             {"template": landmark_vids, **{m: landmark_vids for m in poses}},
+                             {m: preds[m] for m in poses}, list(names),
+                             f"{method}: landmarks on the best .. worst test poses (mean accuracy {mean:.2f})",
+                             os.path.join(out_dir, file), views=views)
+        figures.append(file)
+        shown[method] = poses
+    if shown:
+        worst = {f"{method}: {poses[-1]}": (method, poses[-1]) for method, poses in shown.items()}
+        plot_landmark_panels(template, {k: meshes[pose] for k, (_, pose) in worst.items()},
+                             {"template": landmark_vids, **{k: landmark_vids for k in worst}},
+                             {k: methods[m][pose] for k, (m, pose) in worst.items()}, list(names),
+                             "the worst test pose of each method", os.path.join(out_dir, worst_file),
+                             views=views[:1], wrap=3, legend=False)
+        figures.insert(0, worst_file)
+    return figures, shown
+
+
+def plot_dense_methods(template: tuple, meshes: dict, vertex_maps: dict, errors: dict, out_dir: str,
+                       views: tuple[int, ...] = (0, 1), max_poses: int = 4) -> list[str]:
+    """Per dense method, the template coloured by its coordinates and up to ``max_poses`` test poses coloured by
+    that function pulled back through the method's map, best .. worst by ``errors`` (``dense_<method>.png``).
+
+    Args:
+        template: (V, F); meshes: {pose: (V, F)}.
+        vertex_maps: {method: {pose: (n_template,) int target vertex per template vertex, -1 = none}}.
+        errors: {method: {pose: error or None}} (None: no truth; such poses come last, uncaptioned).
+    Returns the file names written.
+    """
+    figures = []
+    for method, maps in vertex_maps.items():
+        err = errors.get(method, {})
+        order = sorted(maps, key=lambda m: (err.get(m) is None, err.get(m) or 0.0, m))
+        poses = spread_best_to_worst(order, max_poses)
+        captions = {m: f"mean error {err[m]:.3f}" for m in poses if err.get(m) is not None}
+        file = f"dense_{method}.png"
+        plot_dense_panels(template, {m: meshes[m] for m in poses}, {m: maps[m] for m in poses}, captions,
+                          f"{method}: template coordinates as RGB, pulled back through the dense map "
+                          "(best .. worst pose)", os.path.join(out_dir, file), views=views)
+        figures.append(file)
+    return figures

@@ -12,11 +12,12 @@ import numpy as np
 from corr_core.alignment.azimuth import aligned_view_index
 from corr_core.alignment.hog import draw_hog
 
-__all__ = ["plot_hog_drawings", "plot_pair_cost_heatmap", "plot_view_pairs", "plot_aligned_grid",
+__all__ = ["pyplot", "plot_hog_drawings", "plot_pair_cost_heatmap", "plot_view_pairs", "plot_aligned_grid",
            "plot_contact_sheet", "plot_frequency_matrix", "plot_error_curves", "plot_accuracy_bars"]
 
 
-def _pyplot():
+def pyplot():
+    """matplotlib.pyplot on the Agg backend (no display)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -26,7 +27,7 @@ def _pyplot():
 
 
 def _save(fig, path: str | os.PathLike, dpi: int) -> None:
-    plt = _pyplot()
+    plt = pyplot()
     fig.tight_layout()
     fig.savefig(path, dpi=dpi)
     plt.close(fig)
@@ -42,7 +43,7 @@ def _hog_cells(H: np.ndarray):
 
 def plot_hog_drawings(views: dict, features: dict, shapes: list[str], view_ids: list[int], path) -> None:
     """Each shape's chosen views next to their HoG glyph drawings. views {name: (V,S,S)}, features {name: (V,D)}."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(len(shapes), 2 * len(view_ids), figsize=(4.0 * len(view_ids), 2.1 * len(shapes)))
     axes = np.atleast_2d(axes)
     for r, n in enumerate(shapes):
@@ -61,7 +62,7 @@ def plot_hog_drawings(views: dict, features: dict, shapes: list[str], view_ids: 
 
 def plot_pair_cost_heatmap(C_ab: np.ndarray, a: str, b: str, path) -> None:
     """Heat map of D_ij(t1, t2) = C_ij(t2 - t1) for the pair costs C_ab: (V,) of shapes a, b."""
-    plt = _pyplot()
+    plt = pyplot()
     V = len(C_ab)
     t = np.arange(V)
     fig, ax = plt.subplots(figsize=(5, 4.3))
@@ -76,7 +77,7 @@ def plot_pair_cost_heatmap(C_ab: np.ndarray, a: str, b: str, path) -> None:
 def plot_view_pairs(views_a: np.ndarray, views_b: np.ndarray, features_a: np.ndarray, features_b: np.ndarray,
                     a: str, b: str, path) -> None:
     """The most and the least similar view pair of shapes a and b (squared HoG distance per view)."""
-    plt = _pyplot()
+    plt = pyplot()
     Fa, Fb = np.asarray(features_a, np.float64), np.asarray(features_b, np.float64)
     d = (Fa ** 2).sum(1)[:, None] + (Fb ** 2).sum(1)[None, :] - 2 * Fa @ Fb.T
     best, worst = np.unravel_index(np.argmin(d), d.shape), np.unravel_index(np.argmax(d), d.shape)
@@ -91,7 +92,7 @@ def plot_view_pairs(views_a: np.ndarray, views_b: np.ndarray, features_a: np.nda
 
 def plot_aligned_grid(views: dict, labels: dict, shapes: list[str], path) -> None:
     """3x3 grid of aligned shapes: each shape's view at the common frame's view 0. labels {name: int}."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(3, 3, figsize=(6, 6))
     for ax, n in zip(axes.ravel(), shapes):
         ax.imshow(views[n][aligned_view_index(int(labels[n]), len(views[n]))], cmap="gray", vmin=0, vmax=255)
@@ -104,7 +105,7 @@ def plot_aligned_grid(views: dict, labels: dict, shapes: list[str], path) -> Non
 
 def plot_contact_sheet(views: dict, names: list[str], labels: np.ndarray, path, columns: int = 10) -> None:
     """All shapes' aligned view 0 in one image (to check an alignment by eye), ``columns`` per row."""
-    plt = _pyplot()
+    plt = pyplot()
     rows = int(np.ceil(len(names) / columns))
     fig, axes = plt.subplots(rows, columns, figsize=(1.2 * columns, 1.3 * rows), squeeze=False)
     for ax in axes.ravel():
@@ -119,7 +120,7 @@ def plot_contact_sheet(views: dict, names: list[str], labels: np.ndarray, path, 
 
 def plot_frequency_matrix(freq: np.ndarray, names_rows, names_cols, title: str, path) -> None:
     """Heat map of a (n,L) frequency matrix with names on both axes."""
-    plt = _pyplot()
+    plt = pyplot()
     n, L = freq.shape
     fig, ax = plt.subplots(figsize=(2.0 + 0.38 * L, 1.5 + 0.34 * n))
     im = ax.imshow(freq, cmap="viridis", vmin=0.0, vmax=max(1.0, float(freq.max())), aspect="equal")
@@ -137,7 +138,7 @@ def plot_frequency_matrix(freq: np.ndarray, names_rows, names_cols, title: str, 
 
 def plot_error_curves(curves: dict, path, title: str = "Geodesic error (Kim et al. 2011)") -> None:
     """Cumulative error curves. curves: {label: (thresholds (T,), fractions (T,))}."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6, 4.2))
     colors = plt.get_cmap("tab10" if len(curves) <= 10 else "tab20")
     for c, (label, (thr, frac)) in enumerate(curves.items()):
@@ -155,7 +156,7 @@ def plot_error_curves(curves: dict, path, title: str = "Geodesic error (Kim et a
 
 def plot_accuracy_bars(accuracy: dict[str, float], path) -> None:
     """Bar chart of landmark accuracy per method {method: accuracy in [0, 1]}."""
-    plt = _pyplot()
+    plt = pyplot()
     names = list(accuracy)
     fig, ax = plt.subplots(figsize=(7, 3.2))
     ax.bar(names, [accuracy[n] for n in names], color="#4477aa")

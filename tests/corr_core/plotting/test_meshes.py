@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from corr_core import plotting_meshes as pm
+from corr_core.plotting import meshes as pm
 
 
 def box_mesh():
@@ -94,3 +94,16 @@ def test_stand_up_turns_the_longest_axis_up():
     assert pm.up_axis(W) == 2 and pm.up_axis(pm.stand_up(W, 2)) == 1
     M = np.stack([pm.stand_up(np.eye(3), a) for a in (0, 2)])
     assert np.allclose([np.linalg.det(m) for m in M], 1.0)                      # proper rotations
+
+
+def test_pull_back_colors_leaves_out_template_vertices_without_an_image():
+    V = np.random.default_rng(1).normal(size=(20, 3))
+    colors = pm.coordinate_colors(V)
+    vm = np.arange(20)
+    vm[5] = -1
+    out = pm.pull_back_colors(colors, vm, V)
+    keep = np.arange(20) != 5
+    assert np.allclose(out[keep], colors[keep])
+    assert np.allclose(out[5], colors[keep][np.argmin(np.linalg.norm(V[keep] - V[5], axis=1))])
+    with pytest.raises(ValueError, match="at least one image"):
+        pm.pull_back_colors(colors, np.full(20, -1), V)
