@@ -26,7 +26,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from corr_core.geometry.mesh_io import MeshError, check_mesh, load_mesh
-from corr_core.geometry.primitives import face_areas, vertex_components
+from corr_core.geometry.primitives import edge_keys, face_areas, half_edges, unique_edges, vertex_components
 
 __all__ = ["repair_mesh", "load_repaired_mesh", "orient_faces", "warn_repairs", "repair_messages", "compact_mesh"]
 
@@ -89,32 +89,14 @@ def _drop_zero_area(V: np.ndarray, F: np.ndarray, file_ids: np.ndarray, name: st
     return ~bad
 
 
-def _half_edges(F: np.ndarray) -> np.ndarray:
-    """(3m,2) the half-edges (a,b), (b,c), (c,a) of every face, face-major."""
-    return np.stack([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]], axis=1).reshape(-1, 2)
-
-
-def _edge_keys(pairs: np.ndarray) -> np.ndarray:
-    """(k,) int64 key of each undirected vertex pair (k,2), equal for (a,b) and (b,a) (fast np.unique)."""
-    n = int(pairs.max()) + 1 if len(pairs) else 1
-    return np.minimum(pairs[:, 0], pairs[:, 1]) * n + np.maximum(pairs[:, 0], pairs[:, 1])
-
-
-def _edge_counts(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unique undirected edges (e,2) int (rows sorted, lexicographic order) and the faces using each (e,)."""
-    half = _half_edges(F)
-    _, first, counts = np.unique(_edge_keys(half), return_index=True, return_counts=True)
-    return np.sort(half[first], axis=1), counts
-
-
 def _interior_edge_pairs(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The two faces of every manifold interior edge and whether they traverse it the same way.
 
     Returns fa, fb: (e,) int face ids; same_direction: (e,) bool (True = inconsistently oriented pair).
     """
-    half = _half_edges(F)
+    half = half_edges(F)
     face_of = np.repeat(np.arange(len(F)), 3)
-    _, inverse, counts = np.unique(_edge_keys(half), return_inverse=True, return_counts=True)
+    _, inverse, counts = np.unique(edge_keys(half), return_inverse=True, return_counts=True)
     inverse = inverse.ravel()
     interior = np.flatnonzero(counts[inverse] == 2)
     paired = interior[np.argsort(inverse[interior], kind="stable")]
@@ -179,7 +161,7 @@ def _orient(F: np.ndarray, name: str, records: list) -> np.ndarray:
 
 
 def _report_non_manifold(F: np.ndarray, name: str, records: list) -> None:
-    E, count = _edge_counts(F)
+    E, count = unique_edges(F)
     bad = count > 2
     if bad.any():
         first = E[np.flatnonzero(bad)[0]]
@@ -219,7 +201,7 @@ def _report_unreferenced(n_vertices: int, F: np.ndarray, name: str, records: lis
 
 
 def _report_boundary(F: np.ndarray, name: str, records: list) -> None:
-    E, count = _edge_counts(F)
+    E, count = unique_edges(F)
     border = E[count == 1]
     if len(border) == 0:
         return
