@@ -174,8 +174,9 @@ def match_mobius(template, target, template_mesh, target_mesh, landmarks, sparse
     K: deformation-error threshold; with metric "surface" in units of the sample spacing
     sqrt(area / n_samples) (docs/mobius_notes.md), with "plane" in canonical-frame units (the paper).
     Returns {"sparse": (k,), "all": (L,), "dense_errors": (dense_points,) geodesic error / sqrt(area),
-    "best_score": float}. The dense errors need the truth "vertex i <-> vertex i", i.e. the same vertex count
-    and faces as the template; otherwise they are left out and "dense_skipped" (str) says why.
+    "best_score": float, "vertex_map": (n_template,) int target vertex of each template vertex}. The dense
+    errors need the truth "vertex i <-> vertex i", i.e. the same vertex count and faces as the template;
+    otherwise they are left out and "dense_skipped" (str) says why.
     """
     out = matchers.match_mobius(template, target, template_mesh, target_mesh,
                                 _sparse_index(landmarks, sparse_landmarks), K=K, metric=metric, K_scale=K_scale,

@@ -2,7 +2,8 @@
 recovered against true azimuth. Each loads its inputs, calls ``corr_core`` and writes PNGs to ``out_dir``.
 
 Dense maps plug in by name: ``corr.dense_figures`` takes one optional input per dense method, each
-{test mesh: (n_template,) int target vertex per template vertex} (or {test mesh: {"vertex_map": ...}}).
+{test mesh: (n_template,) int target vertex per template vertex} (or {test mesh: {"vertex_map": ...}}, e.g.
+the results of ``corr.match_mobius``).
 """
 from __future__ import annotations
 
@@ -12,8 +13,7 @@ import os
 import numpy as np
 
 from corr_core.alignment.azimuth import agreement_up_to_offset
-from corr_core.correspondence import matchers
-from corr_core.correspondence.landmarks import read_landmarks, subset_positions
+from corr_core.correspondence.landmarks import read_landmarks
 from corr_core.correspondence.measures import identity_euclidean_error
 from corr_core.plotting import meshes as mesh_plots
 
@@ -54,19 +54,6 @@ def landmark_figures(template_mesh, meshes, landmarks, descriptor=None, mrf=None
         _mesh_pair(template_mesh), {m: _mesh_pair(meshes[m]) for p in methods.values() for m in p},
         np.asarray(ids, np.int64), list(names), methods, out_dir, views=VIEWS)
     return {"figures": figures, "poses": shown}
-
-
-@register("corr.mobius_dense_map", group="correspondence", fanout="item")
-def mobius_dense_map(template, target, template_mesh, target_mesh, landmarks, sparse_landmarks, *,
-                     K: float = 0.5, metric: str = "surface", K_scale: float = 0.3, power: float = 4.0) -> dict:
-    """The full dense map of Möbius voting (the same vote as ``corr.match_mobius``; give it the same params):
-    {"vertex_map": (n_template,) int target vertex of each template vertex, -1 off the kept component}."""
-    ids, _ = read_landmarks(landmarks, n_vertices=len(template_mesh["V"]))
-    sids, _ = read_landmarks(sparse_landmarks, n_vertices=len(template_mesh["V"]))
-    sparse = subset_positions(np.asarray(ids), np.asarray(sids), subset_name=sparse_landmarks, full_name=landmarks)
-    return {"vertex_map": matchers.mobius_vertex_map(
-        template, target, template_mesh["area"], target_mesh["area"], len(template_mesh["V"]), sparse, K=K,
-        metric=metric, K_scale=K_scale, power=power)}
 
 
 def _vertex_maps(results) -> dict:

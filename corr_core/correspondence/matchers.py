@@ -106,6 +106,23 @@ def dense_map_errors(best_map: dict, template_flat: dict, target_flat: dict, tem
     return geodesic_errors(target_V, target_F, target_flat["edges"][nn, 0], src_vertices)
 
 
+def dense_vertex_map(best_map: dict, Z_template: np.ndarray, Z_target: np.ndarray, template_flat: dict,
+                     target_flat: dict, n_template: int, metric: str = "plane") -> np.ndarray:
+    """The dense map of one Möbius map for every template vertex: each vertex goes through its first edge
+    midpoint to the nearest target midpoint, then to that edge's first vertex.
+
+    Z_template, Z_target: (E,) complex flattened midpoints; *_flat: ``flattening_features`` dicts. Returns
+    (n_template,) int target vertex ids; -1 for template vertices on no flattened edge (off the kept component,
+    or used by no face).
+    """
+    on_surface = np.unique(template_flat["edges"])
+    nn = mobius.dense_map(best_map, Z_template[vertex_to_edge(on_surface, template_flat["edges"])], Z_target,
+                          metric=metric)
+    out = np.full(int(n_template), -1, np.int64)
+    out[on_surface] = target_flat["edges"][nn, 0]
+    return out
+
+
 def match_mobius(template_flat: dict, target_flat: dict, template_mesh: dict, target_mesh: dict,
                  sparse: np.ndarray, K: float = 0.5, metric: str = "surface", K_scale: float = 0.3,
                  power: float = 4.0, top: int = 100, dense_points: int = 200) -> dict:
@@ -115,9 +132,10 @@ def match_mobius(template_flat: dict, target_flat: dict, template_mesh: dict, ta
     template_flat, target_flat: ``flattening_features`` dicts; template_mesh, target_mesh: {"V", "F", "area"}.
     K: deformation-error threshold; with metric "surface" in units of the sample spacing sqrt(area /
     n_samples) (docs/mobius_notes.md), with "plane" in canonical-frame units (the paper).
-    Returns {"sparse": (k,), "all": (L,), "best_score": float, "dense_errors": (dense_points,) geodesic error /
-    sqrt(area)}. The dense errors need the same vertex count and triangles as the template; otherwise they are
-    left out and "dense_skipped" (str) says why.
+    Returns {"sparse": (k,), "all": (L,), "best_score": float, "vertex_map": (n_template,) int target vertex of
+    each template vertex under the best map (-1 off the kept component, see ``dense_vertex_map``),
+    "dense_errors": (dense_points,) geodesic error / sqrt(area)}. The dense errors need the same vertex count and
+    triangles as the template; otherwise they are left out and "dense_skipped" (str) says why.
     """
     s = mobius_inputs(template_flat, template_mesh["area"], sparse, metric)
     t = mobius_inputs(target_flat, target_mesh["area"], sparse, metric)
@@ -131,7 +149,9 @@ def match_mobius(template_flat: dict, target_flat: dict, template_mesh: dict, ta
     out = {"sparse": np.asarray(res["pred"]),
            "all": np.asarray(mobius.extend_landmarks(maps, s["landmarks"], t["landmarks"], top=top,
                                                      metric=ext_metric)),
-           "best_score": float(res["best_maps"][0]["score"])}
+           "best_score": float(res["best_maps"][0]["score"]),
+           "vertex_map": dense_vertex_map(maps[0], s["Z"], t["Z"], template_flat, target_flat,
+                                          len(template_mesh["V"]), ext_metric)}
     Vs, Fs, Vt, Ft = template_mesh["V"], template_mesh["F"], target_mesh["V"], target_mesh["F"]
     if len(Vt) != len(Vs) or not same_triangles(Ft, Fs):
         out["dense_skipped"] = (f"{len(Vt)} vertices and {len(Ft)} faces vs the template's {len(Vs)} and {len(Fs)} "
@@ -140,30 +160,4 @@ def match_mobius(template_flat: dict, target_flat: dict, template_mesh: dict, ta
     elif dense_points > 0:
         out["dense_errors"] = dense_map_errors(maps[0], template_flat, target_flat, Vs, Vt, Ft, dense_points,
                                                ext_metric)
-    return out
-
-
-def mobius_vertex_map(template_flat: dict, target_flat: dict, template_area: float, target_area: float,
-                      n_template: int, sparse: np.ndarray, K: float = 0.5, metric: str = "surface",
-                      K_scale: float = 0.3, power: float = 4.0) -> np.ndarray:
-    """The dense map of Möbius voting's best map (the vote of ``match_mobius``) for every template vertex.
-
-    template_flat, target_flat: ``flattening_features`` dicts; *_area: surface areas; sparse: (k,) positions of
-    the sparse landmarks in the landmark list. Each template vertex maps through its first edge midpoint to the
-    nearest target midpoint, then to that edge's first vertex. Returns (n_template,) int target vertex ids; -1
-    for template vertices on no flattened edge (off the kept component, or used by no face).
-    """
-    s = mobius_inputs(template_flat, template_area, sparse, metric)
-    t = mobius_inputs(target_flat, target_area, sparse, metric)
-    surface = metric == "surface"
-    res = mobius.mobius_vote_landmarks(s["samples"], t["samples"], s["sparse"], t["sparse"], K=K, metric=metric,
-                                       lam_samples=(s["lam_samples"], t["lam_samples"]) if surface else None,
-                                       lam_landmarks=(s["lam_sparse"], t["lam_sparse"]) if surface else None,
-                                       power=power, K_scale=K_scale if surface else None)
-    best = (res["consensus_maps"] or res["best_maps"])[0]
-    on_surface = np.unique(template_flat["edges"])
-    nn = mobius.dense_map(best, s["Z"][vertex_to_edge(on_surface, template_flat["edges"])], t["Z"],
-                          metric="plane" if surface else metric)
-    out = np.full(int(n_template), -1, np.int64)
-    out[on_surface] = target_flat["edges"][nn, 0]
     return out

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from corr_core.correspondence.matchers import (mobius_vertex_map, descriptor_matrix, match_descriptors, match_geodesic_mrf,
+from corr_core.correspondence.matchers import (descriptor_matrix, match_descriptors, match_geodesic_mrf,
                                                match_mobius)
 from corr_core.correspondence.mesh_features import flattening_features, geodesic_features
 from corr_core.geometry.primitives import surface_area
@@ -64,10 +64,11 @@ def test_mobius_matching_with_dense_errors_and_skipped_dense_map():
 
 
 def test_mobius_vertex_map_of_a_surface_to_itself_and_with_stray_vertices():
+    """match_mobius's dense vertex map: near-identity on the same surface, -1 for vertices on no face."""
     V, F, lm = blob()
     flat = flattening_features(V, F, lm, n_samples=80)
-    area = surface_area(V, F)
-    vm = mobius_vertex_map(flat, flat, area, area, len(V), SPARSE)
+    mesh = {"V": V, "F": F, "area": surface_area(V, F)}
+    vm = match_mobius(flat, flat, mesh, mesh, SPARSE, dense_points=0)["vertex_map"]
     assert vm.shape == (len(V),) and vm.min() >= 0
     # the identity up to the midpoint -> vertex rounding: each vertex lands on itself or a neighbour
     edge = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
@@ -75,6 +76,7 @@ def test_mobius_vertex_map_of_a_surface_to_itself_and_with_stray_vertices():
     # two stray vertices used by no face (ids kept): no image for them, the others unchanged
     V2 = np.vstack([V, [[9.0, 9.0, 9.0], [-9.0, 9.0, 9.0]]])
     flat2 = flattening_features(V2, F, lm, n_samples=80)
-    vm2 = mobius_vertex_map(flat2, flat2, area, area, len(V2), SPARSE)
+    mesh2 = {**mesh, "V": V2}
+    vm2 = match_mobius(flat2, flat2, mesh2, mesh2, SPARSE, dense_points=0)["vertex_map"]
     np.testing.assert_array_equal(vm2[-2:], [-1, -1])
     np.testing.assert_array_equal(vm2[:-2], vm)
