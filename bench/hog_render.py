@@ -18,7 +18,8 @@ if __package__ in (None, ""):
 from corr_core._open3d import load_open3d  # noqa: E402
 from corr_core.alignment.hog import hog_dollar, hog_features, hog_skimage  # noqa: E402
 from corr_core.geometry.mesh_io import normalize_mesh  # noqa: E402
-from corr_core.alignment.render import render_views, rotate_about_y  # noqa: E402
+from corr_core.alignment.render import render_views  # noqa: E402
+from corr_core.geometry.primitives import rotate_about_y  # noqa: E402
 
 
 def benchmark_mesh(n_triangles: int = 15000) -> tuple[np.ndarray, np.ndarray]:

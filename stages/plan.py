@@ -15,7 +15,6 @@ import glob
 import os
 import re
 from dataclasses import dataclass, field
-from typing import Any
 
 from . import fingerprint, registry
 from .config import DatasetSpec, GeneratedPath, InputRef, Pipeline, StageSpec, load_pipeline
@@ -145,10 +144,10 @@ class Plan:
 # ---------------------------------------------------------------------------------------------
 # planning
 # ---------------------------------------------------------------------------------------------
-def build_plan(pipe: Pipeline, log=None) -> Plan:
+def build_plan(pipe: Pipeline) -> Plan:
     """Resolve generated data and datasets, then compute every task and its key. Reads only: runs no
-    generator and writes no file (not even the caches; see :meth:`Plan.save_caches`). ``log`` is unused
-    (planning prints nothing; problems are errors or one-time warnings)."""
+    generator and writes no file (not even the caches; see :meth:`Plan.save_caches`); planning prints nothing
+    (problems are errors or one-time warnings)."""
     store = Store(pipe.cache_dir)  # not claimed here: planning writes nothing (run.prepare claims it)
     fingerprint.use_disk_cache(os.path.join(store.root, "fingerprints.json"))
     hasher = FileHasher(store)

@@ -66,7 +66,7 @@ def prepare(plan: Plan, log) -> Plan:
                             "`run --dry-run` work on a read-only cache")
     if plan.pending_generated:
         write_generated(plan.pipeline, plan.store, sorted(plan.pending_generated), log)
-        plan = build_plan(plan.pipeline, log=log)
+        plan = build_plan(plan.pipeline)
     plan.save_caches()
     return plan
 
@@ -117,7 +117,7 @@ def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None,
                 warnings.warn(f"{error}; recomputing it", stacklevel=1)
                 log(f"warning: {error}; recomputing it")
                 plan.store.invalidate(key)
-            plan = build_plan(plan.pipeline, log=log)
+            plan = build_plan(plan.pipeline)
     try:
         published = publish(plan, log, verified)
     except CorruptEntry as exc:  # changed while this run was publishing

@@ -1,10 +1,10 @@
 """Helpers to build small synthetic pipelines for engine tests."""
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
-import textwrap
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -158,3 +158,26 @@ def normalized_distances(X):
 
     D = np.linalg.norm(X[:, None] - X[None], axis=2)
     return D / D.max()
+
+
+@contextlib.contextmanager
+def loaded_plugin(folder: Path, monkeypatch, name: str, source: str):
+    """Write the plugin module ``name`` (its ``source``) into ``folder``, import it on the path and load it
+    through the registry; unload the module afterwards."""
+    from stages import registry
+
+    (Path(folder) / f"{name}.py").write_text(source)
+    monkeypatch.syspath_prepend(str(folder))
+    sys.modules.pop(name, None)
+    registry.load_plugin(name)
+    try:
+        yield
+    finally:
+        sys.modules.pop(name, None)
+
+
+def run_quiet(path, **kw):
+    """``stages.api.run`` of the pipeline file ``path`` in this process (no dask), quietly."""
+    from stages import api
+
+    return api.run(str(path), workers=0, quiet=True, **kw)

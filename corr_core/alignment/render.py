@@ -26,7 +26,7 @@ import functools
 import numpy as np
 
 from corr_core._open3d import load_open3d
-from corr_core.geometry.primitives import face_normals, rotate_about_y, rotation_about_y  # noqa: F401 (re-exported)
+from corr_core.geometry.primitives import face_normals, rotation_about_y
 
 
 def camera_frames(n_views: int = 16, elevation_deg: float = 20.0) -> np.ndarray:

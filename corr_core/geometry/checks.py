@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from corr_core.geometry.mesh_io import MeshError, check_mesh
-from corr_core.geometry.primitives import face_areas, largest_component, unique_edges, vertex_components  # noqa: F401 (re-exported)
+from corr_core.geometry.primitives import face_areas, unique_edges, vertex_components
 
 
 def check_correspondence_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh",

@@ -22,7 +22,7 @@ import warnings
 
 import numpy as np
 
-from corr_core.geometry.primitives import surface_centroid  # noqa: F401 (re-exported)
+from corr_core.geometry.primitives import surface_centroid
 
 MESH_EXTENSIONS = (".obj", ".off", ".ply", ".stl", ".glb", ".gltf")
 

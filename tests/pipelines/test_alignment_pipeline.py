@@ -116,7 +116,7 @@ def test_aligned_meshes_share_a_frame(chairs_project, dask_client):
     out = chairs_project / "results" / "align_test" / "export" / "aligned_meshes"
     from corr_core.generate.chairs import canonical_chair
     from corr_core.geometry.mesh_io import load_mesh, normalize_mesh
-    from corr_core.alignment.render import rotate_about_y
+    from corr_core.geometry.primitives import rotate_about_y
     angles = []
     for i in (1, 2, 3):
         Va, _ = load_mesh(out / f"{i:03d}.obj")

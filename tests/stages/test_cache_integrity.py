@@ -11,7 +11,7 @@ import pytest
 from stages import api
 from stages.store import Store
 
-from tests.helpers import cli, executed, make_project
+from tests.helpers import cli, executed, make_project, run_quiet
 
 GENERATED_YAML = """\
 name: gen
@@ -33,9 +33,6 @@ def project(tmp_path, monkeypatch):
     return make_project(tmp_path)
 
 
-def _run(path, **kw):
-    return api.run(str(path), workers=0, quiet=True, **kw)
-
 
 def _manifest_of(path, stage: str) -> str:
     """The manifest file of the (once) stage ``stage`` of the pipeline at ``path``."""
@@ -43,12 +40,12 @@ def _manifest_of(path, stage: str) -> str:
     return plan.store.manifest_path(plan.stages[stage].tasks[0].key)
 
 
-def _to_run(path) -> dict[str, int]:
+def _torun_quiet(path) -> dict[str, int]:
     return {r["stage"]: r["to_run"] for r in api.status(str(path))}
 
 
 def test_an_edited_inline_value_is_detected_and_recomputed(project, capsys):
-    _run(project)
+    run_quiet(project)
     true_value = api.metrics(api.plan_pipeline(str(project), quiet=True))["mean_affinity"]
     path = _manifest_of(project, "summary")
     text = open(path, encoding="utf-8").read()
@@ -58,25 +55,25 @@ def test_an_edited_inline_value_is_detected_and_recomputed(project, capsys):
     with open(path, "w", encoding="utf-8") as fh:
         fh.write(text.replace(digits, forged))  # still valid JSON, only one digit changed
 
-    assert _to_run(project)["summary"] == 1                      # status does not say "cached"
+    assert _torun_quiet(project)["summary"] == 1                      # status does not say "cached"
     m = api.metrics(api.plan_pipeline(str(project), quiet=True))
     assert m.get("mean_affinity") != float(forged)              # the forged number is never shown
     assert "does not match its checksum" in capsys.readouterr().err
-    s = _run(project)
+    s = run_quiet(project)
     assert executed(s)["summary"] == 1
     assert api.metrics(api.plan_pipeline(str(project), quiet=True))["mean_affinity"] == true_value
 
 
 @pytest.mark.parametrize("damage", [b'{"format": 2, "key": "tru', b"\xff\xfe\x00garbage", b"null", b"[]", b""])
 def test_an_unreadable_manifest_counts_as_missing(project, capsys, damage):
-    _run(project)
+    run_quiet(project)
     path = _manifest_of(project, "summary")
     with open(path, "wb") as fh:
         fh.write(damage)
-    assert _to_run(project) == {"feat": 0, "dist": 0, "summary": 1, "rep": 0}
+    assert _torun_quiet(project) == {"feat": 0, "dist": 0, "summary": 1, "rep": 0}
     m = api.metrics(api.plan_pipeline(str(project), quiet=True))
     assert m["_not_computed"] == ["summary"]
-    s = _run(project)
+    s = run_quiet(project)
     assert executed(s) == {"feat": 0, "dist": 0, "summary": 1, "rep": 0}
     err = capsys.readouterr().err
     assert "treating it as missing" in err
@@ -102,7 +99,7 @@ def test_unreadable_engine_tables_are_rebuilt(project, tmp_path, table):
 
 def test_a_forged_engine_table_is_not_trusted(project, capsys):
     """A filehash.json row edited to claim an old digest for a changed file is not believed."""
-    _run(project)
+    run_quiet(project)
     root = api.plan_pipeline(str(project), quiet=True).store.root
     doc = json.load(open(os.path.join(root, "filehash.json"), encoding="utf-8"))
     (project.parent / "data" / "s003.txt").write_text("changed content\n")
@@ -111,52 +108,52 @@ def test_a_forged_engine_table_is_not_trusted(project, capsys):
         row[1] = 0  # rows no longer match any file's mtime: everything must be hashed again anyway
     with open(os.path.join(root, "filehash.json"), "w", encoding="utf-8") as fh:
         json.dump(doc, fh)
-    s = _run(project)
+    s = run_quiet(project)
     assert executed(s)["feat"] == 1
     assert "filehash.json does not match its checksum" in capsys.readouterr().err
 
 
-def test_a_deleted_published_file_is_repaired_in_the_same_run(project, tmp_path):
-    s = _run(project)
+def test_a_deleted_published_file_is_repaired_in_the_samerun_quiet(project, tmp_path):
+    s = run_quiet(project)
     published = s["published"]
     plan = api.plan_pipeline(str(project), quiet=True)
     key = plan.stages["rep"].tasks[0].key
     files_dir = plan.store.files_path(key)
     os.remove(os.path.join(files_dir, "summary.txt"))
-    assert _to_run(project)["rep"] == 1
-    s = _run(project)
+    assert _torun_quiet(project)["rep"] == 1
+    s = run_quiet(project)
     assert executed(s)["rep"] == 1
     assert s["published"] == published
     assert (tmp_path / "results" / "syn" / "rep" / "summary.txt").is_file()
 
 
 def test_a_truncated_manifest_of_a_file_stage_does_not_lose_the_outputs(project, tmp_path):
-    s = _run(project)
+    s = run_quiet(project)
     published = s["published"]
     path = _manifest_of(project, "rep")
     data = open(path, "rb").read()
     with open(path, "wb") as fh:
         fh.write(data[: len(data) // 2])
-    s = _run(project)
+    s = run_quiet(project)
     assert executed(s)["rep"] == 1
     assert s["published"] == published
     assert (tmp_path / "results" / "syn" / "rep" / "summary.txt").is_file()
 
 
-def test_a_changed_published_file_of_the_same_size_is_repaired_in_the_same_run(project, tmp_path):
-    _run(project)
+def test_a_changed_published_file_of_the_same_size_is_repaired_in_the_samerun_quiet(project, tmp_path):
+    run_quiet(project)
     plan = api.plan_pipeline(str(project), quiet=True)
     stored = os.path.join(plan.store.files_path(plan.stages["rep"].tasks[0].key), "summary.txt")
     good = open(stored, encoding="utf-8").read()
     with open(stored, "w", encoding="utf-8") as fh:
         fh.write("X" * len(good))  # same size: only the checksum tells
-    s = _run(project)
+    s = run_quiet(project)
     assert executed(s)["rep"] == 1
     assert (tmp_path / "results" / "syn" / "rep" / "summary.txt").read_text() == good
 
 
 def test_has_agrees_with_get_for_a_missing_array(project):
-    _run(project)
+    run_quiet(project)
     plan = api.plan_pipeline(str(project), quiet=True)
     store: Store = plan.store
     key = plan.stages["feat"].tasks[0].key
@@ -170,17 +167,17 @@ def test_an_edited_generated_dataset_is_detected_and_regenerated(tmp_path, monke
     monkeypatch.chdir(tmp_path)
     p = tmp_path / "gen.yaml"
     p.write_text(GENERATED_YAML)
-    _run(p)
+    run_quiet(p)
     plan = api.plan_pipeline(str(p), quiet=True)
     folder = plan.pipeline.generated["things"].path
     victim = os.path.join(folder, "item002.txt")
     original = open(victim, encoding="utf-8").read()
     with open(victim, "w", encoding="utf-8") as fh:
         fh.write("edited by hand\n")
-    s = _run(p)
+    s = run_quiet(p)
     assert "generated dataset 'things'" in capsys.readouterr().err
     assert open(victim, encoding="utf-8").read() == original
     assert sum(executed(s).values()) == 0  # regenerated identically: every result is still valid
     os.remove(victim)
-    _run(p)
+    run_quiet(p)
     assert open(victim, encoding="utf-8").read() == original

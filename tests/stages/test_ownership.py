@@ -13,7 +13,7 @@ from stages.errors import UserError
 from stages.publish import PUBLISHED_NAME
 from stages.store import CACHE_MARKER
 
-from tests.helpers import SYNTHETIC_YAML, make_project
+from tests.helpers import SYNTHETIC_YAML, make_project, run_quiet
 
 
 @pytest.fixture()
@@ -21,9 +21,6 @@ def project(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     return make_project(tmp_path)
 
-
-def _run(path, **kw):
-    return api.run(str(path), workers=0, quiet=True, **kw)
 
 
 def test_a_folder_the_engine_did_not_create_is_never_removed(tmp_path, monkeypatch, capsys):
@@ -34,7 +31,7 @@ def test_a_folder_the_engine_did_not_create_is_never_removed(tmp_path, monkeypat
     (precious / "thesis.tex").write_text("years of work\n")
     p = make_project(tmp_path, yaml_text=SYNTHETIC_YAML.replace("  rep:\n", "  precious:\n")
                      + f"output: {out}\n")
-    s = _run(p)
+    s = run_quiet(p)
     assert (precious / "thesis.tex").read_text() == "years of work\n"
     assert sorted(os.listdir(precious)) == ["thesis.tex"]
     assert "was not written by the engine" in capsys.readouterr().err
@@ -42,22 +39,22 @@ def test_a_folder_the_engine_did_not_create_is_never_removed(tmp_path, monkeypat
 
 
 def test_republishing_replaces_only_the_engines_files(project, tmp_path):
-    _run(project)
+    run_quiet(project)
     stage_dir = tmp_path / "results" / "syn" / "rep"
     assert (tmp_path / "results" / "syn" / PUBLISHED_NAME).is_file()
     (stage_dir / "my_notes.txt").write_text("mine\n")
-    _run(project, overrides=["rep.title=second"])
+    run_quiet(project, overrides=["rep.title=second"])
     assert (stage_dir / "summary.txt").read_text().startswith("second:")
     assert (stage_dir / "my_notes.txt").read_text() == "mine\n"
 
 
 def test_a_file_of_the_user_in_the_engines_place_is_not_overwritten(project, tmp_path, capsys):
     stage_dir = tmp_path / "results" / "syn" / "rep"
-    _run(project)
+    run_quiet(project)
     os.remove(stage_dir / "summary.txt")
     (tmp_path / "results" / "syn" / PUBLISHED_NAME).unlink()   # the engine no longer knows it wrote there
     (stage_dir / "summary.txt").write_text("the user's own file\n")
-    _run(project, overrides=["rep.title=again"])
+    run_quiet(project, overrides=["rep.title=again"])
     assert (stage_dir / "summary.txt").read_text() == "the user's own file\n"
     assert "was not written by the engine" in capsys.readouterr().err
 
@@ -70,14 +67,14 @@ def test_a_foreign_folder_is_never_used_or_cleaned_as_a_cache(project, tmp_path)
     old = time.time() - 10 * 3600
     os.utime(foreign / "tmp" / "old", (old, old))
     with pytest.raises(UserError, match="not a stages cache"):
-        _run(project, cache_dir=str(foreign))
+        run_quiet(project, cache_dir=str(foreign))
     with pytest.raises(UserError, match=CACHE_MARKER):
         api.gc([str(project)], cache_dir=str(foreign))
     assert (foreign / "tmp" / "old" / "keep.txt").is_file() and (foreign / "photos").is_dir()
 
 
 def test_the_cache_gets_a_marker_and_tmp_cleanup_removes_only_engine_folders(project, tmp_path):
-    _run(project)
+    run_quiet(project)
     cache = tmp_path / "cache"
     assert (cache / CACHE_MARKER).is_file()
     engine_tmp = cache / "tmp" / uuid.uuid4().hex
@@ -87,13 +84,13 @@ def test_the_cache_gets_a_marker_and_tmp_cleanup_removes_only_engine_folders(pro
         (d / "f").write_text("x\n")
         old = time.time() - 10 * 3600
         os.utime(d, (old, old))
-    _run(project)
+    run_quiet(project)
     assert not engine_tmp.exists()
     assert (user_tmp / "f").is_file()
 
 
 def test_a_cache_without_marker_is_not_cleaned(project, tmp_path):
-    _run(project)
+    run_quiet(project)
     cache = tmp_path / "cache"
     (cache / CACHE_MARKER).unlink()
     (cache / "photos").mkdir()  # now it is not recognisably the engine's folder
@@ -102,14 +99,14 @@ def test_a_cache_without_marker_is_not_cleaned(project, tmp_path):
     old = time.time() - 10 * 3600
     os.utime(stale, (old, old))
     with pytest.raises(UserError):
-        _run(project)
+        run_quiet(project)
     with pytest.raises(UserError):
         api.gc([str(project)])
     assert stale.is_dir()
 
 
 def test_gc_removes_only_what_the_engine_created(project, tmp_path):
-    _run(project)
+    run_quiet(project)
     cache = tmp_path / "cache"
     mine = cache / "generated" / "my_dataset"
     mine.mkdir(parents=True)

@@ -14,9 +14,8 @@ from html.parser import HTMLParser
 import numpy as np
 import pytest
 
-from tests.helpers import SYNTHETIC_YAML, cli, make_project, plugins_env
+from tests.helpers import SYNTHETIC_YAML, cli, loaded_plugin, make_project, plugins_env
 from stages import api
-from stages import registry
 from stages.report import render_value, write_report
 from stages.report.context import stage_seconds
 
@@ -186,13 +185,9 @@ def _has_row(tables: list[dict], *cells) -> bool:
 @pytest.fixture
 def project(tmp_path, monkeypatch):
     """The synthetic pipeline plus align./corr. plugin stages, in tmp_path (the cwd)."""
-    (tmp_path / f"{PLUGIN}.py").write_text(PLUGIN_SOURCE)
-    monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.chdir(tmp_path)
-    sys.modules.pop(PLUGIN, None)
-    registry.load_plugin(PLUGIN)
-    yield make_project(tmp_path, n=6, yaml_text=SYNTHETIC_YAML + EXTRA_STAGES)
-    sys.modules.pop(PLUGIN, None)
+    with loaded_plugin(tmp_path, monkeypatch, PLUGIN, PLUGIN_SOURCE):
+        yield make_project(tmp_path, n=6, yaml_text=SYNTHETIC_YAML + EXTRA_STAGES)
 
 
 def test_report_contents(project, tmp_path):

@@ -5,15 +5,13 @@ from __future__ import annotations
 import csv
 import io
 import json
-import sys
 
 import pytest
 
-from stages import registry
 from stages.errors import PipelineError
 from stages.execute import Progress
 from stages.sweep import MAX_WIDTH, format_table, headline_columns, write_table
-from tests.helpers import SYNTHETIC_YAML, cli, make_project, plugins_env
+from tests.helpers import SYNTHETIC_YAML, cli, loaded_plugin, make_project, plugins_env
 
 PLUGIN = "sweep_table_plugin"
 PLUGIN_SOURCE = '''
@@ -75,13 +73,9 @@ def test_write_table_csv_and_json(tmp_path):
 
 @pytest.fixture
 def project(tmp_path, monkeypatch):
-    (tmp_path / f"{PLUGIN}.py").write_text(PLUGIN_SOURCE)
-    monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.chdir(tmp_path)
-    sys.modules.pop(PLUGIN, None)
-    registry.load_plugin(PLUGIN)
-    yield make_project(tmp_path, n=4, yaml_text=SYNTHETIC_YAML + EXTRA)
-    sys.modules.pop(PLUGIN, None)
+    with loaded_plugin(tmp_path, monkeypatch, PLUGIN, PLUGIN_SOURCE):
+        yield make_project(tmp_path, n=4, yaml_text=SYNTHETIC_YAML + EXTRA)
 
 
 def test_headline_columns_default_requested_and_unknown(project):

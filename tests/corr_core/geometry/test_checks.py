@@ -4,7 +4,8 @@ import re
 import numpy as np
 import pytest
 
-from corr_core.geometry.checks import check_correspondence_mesh, check_same_connectivity, largest_component
+from corr_core.geometry.checks import check_correspondence_mesh, check_same_connectivity
+from corr_core.geometry.primitives import largest_component
 from corr_core.geometry.mesh_io import MeshError
 
 TET_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
