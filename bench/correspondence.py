@@ -1,102 +1,185 @@
-"""Correspondence benchmark: seconds per mesh for each preprocessing step and per pair for each matching
-method, with the share of the largest step. Times the corr_core functions the pipeline's stages call.
+"""Dense correspondence on the course SCAPE data: the project's dense maps against pyFM, in one run.
 
-    python bench/correspondence.py [--data ../shared/data/hw3/scape] [--meshes 3]
+Template meshes/template/mesh000.obj -> each of meshes/test/*.obj (ground truth: vertex i <-> vertex i).
+Inputs used by every method: the two meshes; ``dense_sparse`` and pyFM "5 points" also the 5 sparse landmark ids
+(sparse_landmark_vids.txt, on both meshes); ``dense_auto`` and pyFM "none" no point on the target.
+The 20 landmarks (landmark_vids.txt) are used only to *evaluate* the transfer; uniform_sample_vids.txt is never read.
 
-Without the course data it uses the generated humanoid (corr_core.generate).
+Methods:
+  pyfm_none    pyFM 1.3 (pip ``pyfmaps``): WKS (100 energies, every 5th as descriptor) functional map 35x35 with the
+               orientation term (w_descr 1, w_lap 0.1, w_dcomm 1, w_orient 1), ZoomOut on all vertices to 115
+               (16 steps of 5); the point map of the ZoomOut map (pyFM 1.3 returns it without storing it)
+  pyfm_5pts    the same with the 5 sparse landmarks as landmark descriptors
+  dense_sparse corr_core.correspondence.dense with the 5 sparse landmarks given on both meshes
+  dense_auto   corr_core.correspondence.dense, automatic (nothing given on the target)
+
+Measures (target surface, heat-method geodesics, / sqrt(target area)): dense mean error over ``--eval-vertices``
+farthest-point template vertices, fraction within 0.05 / 0.10 / 0.25, landmark accuracy (a transferred landmark is
+right when its nearest true landmark has its name), landmark transfer error, seconds per pair. CPU seconds (time.process_time) per pair
+includes the target's own per-mesh work (eigenpairs etc.); the template's is done once for every method
+(pyFM: its template TriMesh is processed once and reused) and reported separately.
+
+Run:  python bench/correspondence.py [--pairs N] [--methods pyfm_none,pyfm_5pts,dense_sparse,dense_auto] [--json OUT]
+      python bench/correspondence.py --summarize OUT.json   (the table of a saved, possibly partial, run)
 """
 from __future__ import annotations
 
 import argparse
 import glob
+import json
 import os
 import sys
-import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from corr_core.correspondence import matchers, mesh_features  # noqa: E402
-from corr_core.correspondence.landmarks import read_landmarks, subset_positions  # noqa: E402
-from corr_core.geometry.checks import check_correspondence_mesh  # noqa: E402
-from corr_core.geometry.repair import load_repaired_mesh  # noqa: E402
-from corr_core.geometry.primitives import surface_area  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+DEFAULT_DATA = os.path.join(os.path.dirname(ROOT), "shared", "data", "hw3", "scape")
+METHODS = ("pyfm_none", "pyfm_5pts", "dense_sparse", "dense_auto")
 
 
-def timed(fn, *args, **kw):
-    t0 = time.perf_counter()
-    out = fn(*args, **kw)
-    return out, time.perf_counter() - t0
+def _pyfm_template(path: str, k: int = 120):
+    from pyFM.mesh import TriMesh
+
+    return TriMesh(path, area_normalize=True, center=True).process(k=k, intrinsic=False, verbose=False)
 
 
-def print_shares(title: str, timings: dict[str, list[float]], whole: str) -> None:
-    """Mean seconds of each step, its share of the total, and the largest step."""
-    means = {k: float(np.mean(v)) for k, v in timings.items()}
-    total = sum(means.values())
-    print(f"\n{title}")
-    for k, v in means.items():
-        print(f"  {k:<26} {v:8.4f} s   {v / total:6.1%}")
-    largest = max(means, key=means.get)
-    print(f"  largest: {largest} ({means[largest] / total:.0%} of {whole})")
+def run_pyfm(template_mesh, target_path: str, landmarks=None) -> np.ndarray:
+    """pyFM recipe of docs/NOTES.md; returns (n_template,) target vertex ids."""
+    from pyFM.functional import FunctionalMapping
+    from pyFM.mesh import TriMesh
+
+    target = TriMesh(target_path, area_normalize=True, center=True)
+    model = FunctionalMapping(target, template_mesh)
+    lm = None if landmarks is None else np.asarray(landmarks)
+    model.preprocess(n_descr=100, descr_type="WKS", landmarks=lm, subsample_step=5, k_process=120,
+                     verbose=False)
+    model.fit(K=(35, 35), w_descr=1, w_lap=0.1, w_dcomm=1, w_orient=1, verbose=False)
+    # pyFM 1.3 returns the refined map and does not store it: convert *that* one (get_p2p() alone would use the
+    # 35x35 map of fit())
+    C_zoomout = model.zoomout_refine(nit=16, step=5, verbose=False)
+    return np.asarray(model.get_p2p(FM=C_zoomout), dtype=np.int64)   # p2p_21: template vertex -> target vertex
 
 
-def load_checked(path: str) -> dict:
-    """The mesh as the corr.mesh stage gives it: {"V", "F", "area"} (repaired, checked for intrinsic methods)."""
-    V, F, _ = load_repaired_mesh(path, keep_largest_component=True)
-    check_correspondence_mesh(V, F, name=os.path.basename(path))
-    return {"V": V, "F": F, "area": surface_area(V, F)}
+SUMMARY_KEYS = ("landmark_accuracy", "mean_error", "within_0.05", "within_0.10", "within_0.25", "landmark_error",
+                "seconds")
 
 
-def prepare(path: str, landmark_ids: np.ndarray, pre: dict[str, list[float]]) -> tuple:
-    """Per-mesh inputs of the matchers, each step timed into ``pre``."""
-    m, t = timed(load_checked, path)
-    pre["load+repair+check"].append(t)
-    s, t = timed(mesh_features.spectral_features, m["V"], m["F"], landmark_ids)
-    pre["eigenpairs+HKS/WKS"].append(t)
-    g, t = timed(mesh_features.geodesic_features, m["V"], m["F"], landmark_ids)
-    pre["geodesics"].append(t)
-    f, t = timed(mesh_features.flattening_features, m["V"], m["F"], landmark_ids)
-    pre["flatten+samples"].append(t)
-    return m, s, g, f
+def print_summary(rows: list, methods: list, template_seconds: dict, n_eval: int, template: str) -> dict:
+    """Print the side-by-side table (means over the pairs) and return {method: {measure: mean}}."""
+    summary = {m: {k: float(np.mean([r[m][k] for r in rows])) for k in SUMMARY_KEYS} for m in methods}
+    print(f"\n{len(rows)} pairs, template {template}; errors: geodesic / sqrt(area) at {n_eval} farthest-point "
+          "template vertices; seconds: CPU per pair (target's per-mesh work included); template set-up (once): "
+          + ", ".join(f"{k} {v:.1f}s" for k, v in template_seconds.items()))
+    print(f"{'method':<14}{'lm acc':>8}{'mean err':>10}{'<=0.05':>8}{'<=0.10':>8}{'<=0.25':>8}{'lm err':>8}"
+          f"{'s/pair':>8}")
+    for m, s in summary.items():
+        print(f"{m:<14}{s['landmark_accuracy']:>8.4f}{s['mean_error']:>10.4f}{s['within_0.05']:>8.3f}"
+              f"{s['within_0.10']:>8.3f}{s['within_0.25']:>8.3f}{s['landmark_error']:>8.4f}{s['seconds']:>8.1f}")
+    return summary
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data" / "hw3" / "scape"))
-    ap.add_argument("--meshes", type=int, default=3, help="number of test meshes to time")
-    args = ap.parse_args()
-    data = Path(args.data)
-    if not (data / "meshes").is_dir():
-        from corr_core.generate import write_humanoid_dataset
-        data = Path(tempfile.mkdtemp()) / "humanoid"
-        write_humanoid_dataset(data, n_poses=args.meshes, seed=0)
-        print(f"course data not found; using a generated humanoid in {data}")
-    template = sorted(glob.glob(str(data / "meshes" / "template" / "*.obj")))[0]
-    tests = sorted(glob.glob(str(data / "meshes" / "test" / "*.obj")))[: args.meshes]
-    ids, _ = read_landmarks(data / "landmark_vids.txt")
-    sparse = subset_positions(ids, read_landmarks(data / "sparse_landmark_vids.txt")[0])
-    pre = {"load+repair+check": [], "eigenpairs+HKS/WKS": [], "geodesics": [], "flatten+samples": []}
-    prepared = {path: prepare(path, ids, pre) for path in [template] + tests}
-    n_vertices = len(prepared[template][0]["V"])
-    print_shares(f"preprocessing, seconds per mesh ({len(prepared)} meshes, {n_vertices} vertices)", pre,
-                 "preprocessing")
-    per = {"descriptor+Hungarian": [], "geodesic MRF": [], "geodesic MRF+orientation": [], "Möbius voting": []}
-    mT, sT, gT, fT = prepared[template]
+def summarize(path: str) -> int:
+    """Print the table of a results file written with --json (also of an interrupted run: its finished pairs)."""
+    with open(path) as fh:
+        data = json.load(fh)
+    rows = data["pairs"]
+    if not rows:
+        print(f"{path}: no finished pair", file=sys.stderr)
+        return 2
+    methods = [m for m in rows[0] if m != "mesh"]
+    print("pairs: " + " ".join(r["mesh"] for r in rows))
+    print_summary(rows, methods, data.get("template_seconds", {}), data.get("eval_vertices", 2000),
+                  "meshes/template/mesh000.obj")
+    return 0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", default=DEFAULT_DATA, help="course scape/ folder")
+    ap.add_argument("--pairs", type=int, default=None, help="only the first N test meshes")
+    ap.add_argument("--methods", default=",".join(METHODS))
+    ap.add_argument("--eval-vertices", type=int, default=2000, help="farthest-point template vertices evaluated")
+    ap.add_argument("--json", default=None, help="write per-pair and summary results here")
+    ap.add_argument("--summarize", default=None, metavar="JSON", help="only print the table of a --json file")
+    args = ap.parse_args(argv)
+    if args.summarize:
+        return summarize(args.summarize)
+
+    from corr_core.correspondence.dense import basis as dense_basis
+    from corr_core.correspondence.dense import dense_map, measures
+    from corr_core.correspondence.dense.transfer import transfer_landmarks
+    from corr_core.correspondence.landmarks import read_landmarks
+    from corr_core.geometry.geodesic import GeodesicSolver
+    from corr_core.geometry.mesh_io import load_mesh
+
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    unknown = sorted(set(methods) - set(METHODS))
+    if unknown:
+        ap.error(f"unknown methods {unknown}; choose from {', '.join(METHODS)}")
+    tpl_path = os.path.join(args.data, "meshes", "template", "mesh000.obj")
+    tests = sorted(glob.glob(os.path.join(args.data, "meshes", "test", "*.obj")))[:args.pairs]
+    if not os.path.isfile(tpl_path) or not tests:
+        print(f"no SCAPE data under {args.data} (expected meshes/template/mesh000.obj and meshes/test/*.obj)",
+              file=sys.stderr)
+        return 2
+    Vs, Fs = load_mesh(tpl_path)
+    lm_ids, lm_names = read_landmarks(os.path.join(args.data, "landmark_vids.txt"), n_vertices=len(Vs))
+    sparse_ids, _ = read_landmarks(os.path.join(args.data, "sparse_landmark_vids.txt"), n_vertices=len(Vs))
+
+    t0 = time.process_time()
+    S = dense_basis.mesh_basis(Vs, Fs, k=100, name=tpl_path)
+    S.sample_distances(300)                     # template geodesics of the refinement's patches (once per template)
+    template_seconds = {"dense": time.process_time() - t0}
+    pyfm_template = None
+    if any(m.startswith("pyfm") for m in methods):
+        t0 = time.process_time()
+        pyfm_template = _pyfm_template(tpl_path)
+        template_seconds["pyfm"] = time.process_time() - t0
+    eval_vertices = S.samples[:args.eval_vertices]
+
+    rows = []
     for path in tests:
-        m, s, g, f = prepared[path]
-        per["descriptor+Hungarian"].append(timed(matchers.match_descriptors, sT, s, sparse)[1])
-        per["geodesic MRF"].append(timed(matchers.match_geodesic_mrf, gT, g, sparse)[1])
-        per["geodesic MRF+orientation"].append(timed(matchers.match_geodesic_mrf, gT, g, sparse,
-                                                     orientation_test=True)[1])
-        per["Möbius voting"].append(timed(matchers.match_mobius, fT, f, mT, m, sparse, dense_points=0)[1])
-    print_shares(f"matching, seconds per pair ({len(tests)} pairs, {len(ids)} + sparse {len(sparse)} landmarks)",
-                 per, "matching time")
+        name = os.path.splitext(os.path.basename(path))[0]
+        Vt, Ft = load_mesh(path)
+        maps, seconds = {}, {}
+        for m in methods:
+            t0 = time.process_time()
+            if m == "pyfm_none":
+                maps[m] = run_pyfm(pyfm_template, path)
+            elif m == "pyfm_5pts":
+                maps[m] = run_pyfm(pyfm_template, path, landmarks=sparse_ids)
+            else:
+                T = dense_basis.mesh_basis(Vt, Ft, k=100, name=path)
+                if m == "dense_sparse":
+                    maps[m] = dense_map(Vs, Fs, Vt, Ft, sparse_ids, sparse_ids, basis_template=S, basis_target=T)
+                else:
+                    maps[m] = dense_map(Vs, Fs, Vt, Ft, basis_template=S, basis_target=T)
+            seconds[m] = time.process_time() - t0
+        solver = GeodesicSolver(Vt, Ft)
+        errs = measures.dense_errors(Vt, Ft, maps, np.arange(len(Vs)), vertices=eval_vertices, solver=solver)
+        row = {"mesh": name}
+        for m in methods:
+            placed = transfer_landmarks(maps[m], lm_ids)
+            lm_err, nearest = measures.landmark_errors(Vt, Ft, placed, lm_ids, solver=solver)
+            row[m] = {**measures.summary(errs[m]), "landmark_accuracy": measures.landmark_accuracy(nearest),
+                      "landmark_error": float(lm_err.mean()), "seconds": seconds[m],
+                      "kim_curve": measures.kim_curve(errs[m]).tolist()}
+        rows.append(row)
+        if args.json:                                          # per-pair results survive an interrupted run
+            with open(args.json, "w") as fh:
+                json.dump({"pairs": rows, "template_seconds": template_seconds}, fh, indent=1)
+        print(name + "  " + "  ".join(f"{m}: {row[m]['mean_error']:.4f} acc {row[m]['landmark_accuracy']:.2f} "
+                                      f"{row[m]['seconds']:.1f}s" for m in methods), flush=True)
+
+    summary = print_summary(rows, methods, template_seconds, len(eval_vertices),
+                            os.path.relpath(tpl_path, args.data))
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump({"summary": summary, "pairs": rows, "template_seconds": template_seconds}, fh, indent=1)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

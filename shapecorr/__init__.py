@@ -2,7 +2,7 @@
 (``shapecorr = "shapecorr:PLUGIN"`` in pyproject.toml): importing this package registers them."""
 from stages.registry import Headline, Measure, Plugin
 
-from . import alignment, correspondence, generators  # noqa: F401  (importing registers the functions)
+from . import alignment, correspondence, dense, generators  # noqa: F401  (importing registers the functions)
 from . import figures  # noqa: F401  (mesh pictures of the correspondences, recovered azimuths)
 
 PLUGIN = Plugin(
@@ -30,12 +30,13 @@ PLUGIN = Plugin(
                               per_row={"mobius_all": "dense_map.mean_error"}),
                       Measure("dense within 0.25", "dense.{row}.within_0.25",
                               per_row={"mobius_all": "dense_map.within_0.25"}),
+                      Measure("landmark transfer error", "landmark_error.{row}", better="min"),
                       Measure("seconds per pair", "@seconds_per_task", better="min")),
             row_inputs={"descriptor_sparse": "descriptor", "mrf_sparse": "mrf",
                         "mrf_oriented_sparse": "mrf_oriented", "mobius_sparse": "mobius_votes",
                         "mobius_all": "mobius_votes"},
             figures=("corr.landmark_figures:landmarks_worst_per_method.png",
-                     "corr.evaluate:dense_map_error_curve.png")),
+                     "corr.evaluate:kim_curves.png", "corr.dense_figures:dense_dense_auto.png")),
     ),
     sweep_metrics=("ground_truth.exact", "ground_truth.mean_error_deg", "seed_stability.min", "equivariance",
                    "accuracy.descriptor", "accuracy.mrf", "accuracy.mrf_oriented", "accuracy.mobius_all", "dense_map.mean_error"),

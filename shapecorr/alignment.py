@@ -2,6 +2,9 @@
 
 views (per shape) -> hog (per shape) -> pairs (per tile of shape pairs: C_ij(theta)) -> solve (MRF)
 -> evaluate (metrics) / export (aligned OBJs, views, alignment.csv, zips) / figures.
+At scale (pipelines/scale.yaml): hog -> descriptor (per shape, rotation invariant) -> candidates (once: the
+candidate graph) -> pairs on that graph only (``align.pair_costs_sparse`` with ``candidates:``) -> solve /
+evaluate on the sparse costs.
 The algorithms live in corr_core; these functions only load, call and store.
 """
 from __future__ import annotations
@@ -14,8 +17,8 @@ import zipfile
 import numpy as np
 
 from corr_core import plotting
-from corr_core.alignment import azimuth, measures, solvers
-from corr_core.alignment.pair_costs import mirror_pair_costs
+from corr_core.alignment import azimuth, candidates, graph_costs, measures, solvers
+from corr_core.alignment.pair_costs import mirror_pair_costs, pair_costs_listed
 from corr_core.alignment.pair_costs import pair_costs as compute_pair_costs
 from corr_core.alignment.hog import hog_features
 from corr_core.geometry.mesh_io import MESH_EXTENSIONS, normalize_mesh, save_obj
@@ -95,19 +98,72 @@ def pair_costs(A, B) -> np.ndarray:
     return compute_pair_costs(A, B)
 
 
+@register("align.descriptor", group="alignment", fanout="item")
+def descriptor(features, *, dim: int = candidates.DESCRIPTOR_DIM, seed: int = 0) -> dict:
+    """Per-shape inputs of the candidate graph, from its view features (V, D): {"descriptor": (dim,) float32
+    rotation-invariant descriptor (``candidates.rotation_invariant_descriptor``), "self_costs": (V,) float32
+    C_ii(theta) (the shape's rotational symmetry)}."""
+    F = np.asarray(features)
+    return {"descriptor": candidates.rotation_invariant_descriptor(F, dim, seed),
+            "self_costs": compute_pair_costs(F[None])[0, 0]}
+
+
+def _check_candidates(*, graph: str, k: int, n_random: int, seed: int) -> None:
+    """Config-time check of align.candidates params."""
+    if graph not in ("candidates", "complete"):
+        raise ValueError(f"parameter 'graph' = {graph!r}: use 'candidates' (k nearest + random pairs) or "
+                         f"'complete' (every pair)")
+    if k < 1 or n_random < 0:
+        raise ValueError(f"parameters k = {k}, n_random = {n_random}: need k >= 1 and n_random >= 0")
+
+
+@register("align.candidates", group="alignment", fanout="once", validate=_check_candidates)
+def candidate_graph(descriptors, *, graph: str = "candidates", k: int = 10, n_random: int = 2,
+                    seed: int = 0) -> dict:
+    """The candidate graph of the pair stage: {"names": M shapes (sorted), "pairs": (P, 2) int64 indices,
+    "kind": (P,) int8 (``candidates.PAIR_KINDS``), "self_costs": (M, V) float32, "graph", "k"}.
+    graph "candidates": each shape's k nearest shapes by descriptor, n_random random partners per shape
+    (seed), bridges until connected (``candidates.candidate_pairs``); "complete": every pair."""
+    names = sorted(descriptors)
+    X = np.stack([np.asarray(descriptors[n]["descriptor"]) for n in names])
+    if graph == "complete":
+        pairs, kind = candidates.complete_pairs(len(names))
+    else:
+        pairs, kind = candidates.candidate_pairs(X, k=k, n_random=n_random, seed=seed, self_pairs=False)
+    return {"names": names, "pairs": pairs, "kind": kind, "graph": graph, "k": int(k),
+            "self_costs": np.stack([np.asarray(descriptors[n]["self_costs"], np.float32) for n in names])}
+
+
+@register("align.pair_costs_sparse", group="alignment", fanout="pair", mirror=mirror_pair_costs)
+def pair_costs_sparse(A, B, *, pairs=None) -> np.ndarray:
+    """C for listed pairs: (p, V) float32 for pairs (p, 2) local indices (row of A, row of B) of a candidate
+    graph (``pair_costs_listed``), or the (a, b, V) tile of every pair when pairs is None."""
+    return compute_pair_costs(A, B) if pairs is None else pair_costs_listed(A, B, pairs)
+
+
+def _alignment_costs(costs: dict, graph: dict | None):
+    """A pair stage's result as the solvers take it: the dense (N, N, V) matrix ({"names", "matrix"}) or, on a
+    candidate graph ({"names", "pairs", "values"}), ``graph_costs.GraphCosts`` (with the graph's random sample
+    and self costs when ``graph``, the candidates stage's result, is given)."""
+    if "matrix" in costs:
+        return np.asarray(costs["matrix"])
+    return graph_costs.from_candidates(list(costs["names"]), costs["pairs"], costs["values"], graph)
+
+
 @register("align.solve", group="alignment", fanout="once")
-def solve(costs, *, solver: str = "lh", sigma: float | str = "auto", sigma_scale: float = 1.0, seed: int = 0,
+def solve(costs, graph=None, *, solver: str = "lh", sigma: float | str = "auto", sigma_scale: float = 1.0, seed: int = 0,
           knn: int = 0, symmetric: bool = True) -> dict:
     """Joint alignment: MRF over shapes with V labels (rotation offsets), W_ij = exp(-D_ij / sigma).
 
-    costs: {"names": N names, "matrix": (N, N, V) C}. solver: "lh" (Leordeanu & Hebert + climbing),
+    costs: {"names": N names, "matrix": (N, N, V) C}, or the pairs of a candidate graph {"names", "pairs" (P, 2),
+    "values" (P, V)} with graph: the candidates stage's result. solver: "lh" (Leordeanu & Hebert + climbing),
     "spectral" (angular synchronization), "ppm" (projected power). sigma: "auto" = median over pairs of
     min_theta C_ij, times sigma_scale. knn > 0 keeps only each shape's k nearest shapes in the graph.
     symmetric: detect each shape's rotational symmetry and keep symmetric shapes from steering the others.
     Returns {"names", "labels" (N,) int, "angles_deg" (N,) continuous degrees, "symmetry_order" (N,) int,
     "sigma", "energy", "solver", ...} (``corr_core.alignment.solvers.solve_alignment``).
     """
-    out = solvers.solve_alignment(np.asarray(costs["matrix"]), solver=solver, sigma=sigma,
+    out = solvers.solve_alignment(_alignment_costs(costs, graph), solver=solver, sigma=sigma,
                                   sigma_scale=sigma_scale, seed=seed, knn=knn, symmetric=symmetric)
     return {"names": list(costs["names"]), **out}
 
@@ -127,8 +183,8 @@ def _read_ground_truth(path) -> tuple[dict[str, int] | None, dict[str, float] | 
 
 
 @register("align.evaluate", group="alignment", fanout="once")
-def evaluate(costs, solution, ground_truth=None, other=None, *, seeds: list = (0, 1, 2, 3, 4),
-             shift_seed: int = 123, restarts: int = 20, compare_solvers: bool = True) -> dict:
+def evaluate(costs, solution, ground_truth=None, other=None, graph=None, *, seeds: list = (0, 1, 2, 3, 4),
+             shift_seed: int = 123, restarts: int = 20, compare_solvers: bool = True, icm_starts: int = 5) -> dict:
     """Metrics of an alignment run (all agreements are up to one global offset).
 
     - labels {name: view index} and angle_deg;
@@ -141,12 +197,13 @@ def evaluate(costs, solution, ground_truth=None, other=None, *, seeds: list = (0
       symmetry, and the continuous mean_error_deg when the csv has azimuth_deg;
     - angles_deg {name: continuous degrees} and symmetry_order {name: k} (1 none, 0 every angle);
     - mode_agreement with another run's solution (e.g. meshes vs pre-rendered views) on common shapes.
-    Re-solves use the solution's graph (``knn``); energies use the complete graph.
+    Re-solves use the solution's graph (``knn``); energies use the complete graph. On a candidate graph (costs
+    and graph as for align.solve) everything is on that graph, plus pairs_computed / pairs_total.
     """
     steps, degrees, orders = _read_ground_truth(ground_truth)
-    return measures.evaluate_alignment(np.asarray(costs["matrix"]), solution, steps, other, seeds=seeds,
+    return measures.evaluate_alignment(_alignment_costs(costs, graph), solution, steps, other, seeds=seeds,
                                        shift_seed=shift_seed, restarts=restarts, compare_solvers=compare_solvers,
-                                       truth_deg=degrees, truth_orders=orders)
+                                       truth_deg=degrees, truth_orders=orders, icm_starts=icm_starts)
 
 
 def _write_alignment_csv(path: str, names: list[str], labels: np.ndarray, angles_deg: np.ndarray,

@@ -16,77 +16,66 @@ import numpy as np
 
 from corr_core import plotting
 from corr_core.correspondence import matchers, measures, mesh_features
-from corr_core.correspondence.landmarks import read_landmarks, subset_positions
+from corr_core.correspondence.landmarks import read_landmarks
 from corr_core.geometry import checks as meshcheck
-from corr_core.geometry.intrinsic import IntrinsicMesh
 from corr_core.geometry.mesh_io import load_mesh
 from corr_core.geometry.primitives import mesh_edges, surface_area
 from corr_core.geometry.repair import repair_mesh, warn_repairs
 
 from stages.registry import register
 
-
-def _landmarks(path: str, n_vertices: int | None = None) -> tuple[np.ndarray, list[str]]:
-    ids, names = read_landmarks(path, n_vertices=n_vertices)
-    return np.asarray(ids, dtype=np.int64), list(names)
-
-
-def _sparse_index(all_path: str, sparse_path: str, n_vertices: int | None = None) -> np.ndarray:
-    """Positions of the sparse landmarks within the full landmark list: (k,) int."""
-    ids, _ = _landmarks(all_path, n_vertices)
-    sids, _ = _landmarks(sparse_path, n_vertices)
-    return subset_positions(ids, sids, subset_name=sparse_path, full_name=all_path)
+from .dense import dense_reports
+from .landmark_sources import _landmarks, _no_landmarks, _sparse_index, mesh_landmarks
 
 
 @register("corr.mesh", group="correspondence", fanout="item")
-def mesh(path) -> dict:
+def mesh(path, *, item_name: str | None = None) -> dict:
     """Load, repair (vertex ids kept) and check one mesh for the intrinsic methods: only the largest connected
     component is kept (its faces; the vertices of small loose pieces and those no face uses stay in V, with
     their ids, and every method ignores them: ``corr_core.geometry.intrinsic.IntrinsicMesh``).
 
     Returns {"V": (n,3) float64 all vertices in file order, "F": (m,3) int64 repaired faces of the largest
-    component, "area": float (of F), "name": file name, "warnings": [str], "repairs": [record]
-    (``corr_core.geometry.repair``: what was dropped / flipped / ignored, each naming the file)}.
+    component, "area": float (of F), "name": file name, "item": item name, "warnings": [str], "repairs": [record]
+    (``corr_core.geometry.repair``: what was dropped / flipped / ignored, each naming the file)}. ``item_name`` puts
+    the item in the cache key: two files with the same content get their own entries, each with its own name
+    (by which the per-mesh files landmarks/<mesh>.txt and ground_truth/<mesh>.txt are found).
     """
     name = os.path.basename(path)
     V, F = load_mesh(path)
     F, repairs = repair_mesh(V, F, name, keep_largest_component=True)
     warn_repairs(repairs)
     warnings = meshcheck.check_correspondence_mesh(V, F, name=name, allow_unreferenced=True)
-    return {"V": V, "F": F.astype(np.int64), "area": surface_area(V, F), "name": name,
+    return {"V": V, "F": F.astype(np.int64), "area": surface_area(V, F), "name": name, "item": item_name,
             "warnings": list(warnings), "repairs": repairs}
 
 
-def _landmarks_on(mesh: dict, path: str) -> np.ndarray:
-    """(L,) int landmark vertex ids of ``path``, checked to lie on the mesh's kept component (an error naming
-    the landmark, the landmark file and the mesh file otherwise)."""
-    ids, names = _landmarks(path, len(mesh["V"]))
-    IntrinsicMesh(mesh["V"], mesh["F"]).to_sub(
-        ids, what="landmark", names=names, source=f"{os.path.basename(path)} on {mesh.get('name', 'the mesh')}")
-    return ids
-
-
 @register("corr.spectral", group="correspondence", fanout="item")
-def spectral(mesh, landmarks, *, k: int = 100, n_times: int = 16, n_energies: int = 100,
-             wks_variance: float = 6.0) -> dict:
-    """HKS and WKS at the landmark vertices from the first k Laplace-Beltrami eigenpairs.
+def spectral(mesh, landmarks, landmark_files=None, template_mesh=None, *, k: int = 100, n_times: int = 16,
+             n_energies: int = 100, wks_variance: float = 6.0) -> dict:
+    """HKS and WKS at the landmark vertices (``mesh_landmarks``) from the first k Laplace-Beltrami eigenpairs.
 
-    Returns {"hks": (L, n_times), "wks": (L, n_energies), "evals": (k,)}.
+    Returns {"hks": (L, n_times), "wks": (L, n_energies), "evals": (k,), "n_vertices", "landmark_source"}, or
+    {"no_landmarks": why} for a mesh without landmarks.
     """
-    ids = _landmarks_on(mesh, landmarks)
+    ids, source = mesh_landmarks(mesh, landmarks, landmark_files, template_mesh)
+    if ids is None:
+        return _no_landmarks(mesh, source)
     out = mesh_features.spectral_features(mesh["V"], mesh["F"], ids, k=k, n_times=n_times, n_energies=n_energies,
                                           wks_variance=wks_variance)
-    return {**out, "n_vertices": len(mesh["V"])}  # matchers tell whether the landmark truth applies
+    return {**out, "n_vertices": len(mesh["V"]), "landmark_source": source}  # matchers: does the truth apply
 
 
 @register("corr.geodesics", group="correspondence", fanout="item")
-def geodesics(mesh, landmarks) -> dict:
+def geodesics(mesh, landmarks, landmark_files=None, template_mesh=None) -> dict:
     """Landmark geodesic distances normalized by the geodesic diameter, and landmark chirality.
 
-    Returns {"D": (L,L) float, "diameter": float, "chirality": (L,L,L) float}.
+    Returns {"D": (L,L) float, "diameter": float, "chirality": (L,L,L) float, ...} or {"no_landmarks": why}.
     """
-    ids = _landmarks_on(mesh, landmarks)
-    return {**mesh_features.geodesic_features(mesh["V"], mesh["F"], ids), "n_vertices": len(mesh["V"])}
+    ids, source = mesh_landmarks(mesh, landmarks, landmark_files, template_mesh)
+    if ids is None:
+        return _no_landmarks(mesh, source)
+    return {**mesh_features.geodesic_features(mesh["V"], mesh["F"], ids), "n_vertices": len(mesh["V"]),
+            "landmark_source": source}
 
 
 def _given_flat(folder, item_path: str, n_edges: int):
@@ -105,8 +94,8 @@ def _given_flat(folder, item_path: str, n_edges: int):
 
 
 @register("corr.flatten", group="correspondence", fanout="item")
-def flatten(mesh, path, landmarks, flattened=None, samples=None, *, source: str = "compute",
-            sample_source: str = "auto", n_samples: int = 300) -> dict:
+def flatten(mesh, path, landmarks, flattened=None, samples=None, landmark_files=None, template_mesh=None, *,
+            source: str = "compute", sample_source: str = "auto", n_samples: int = 300) -> dict:
     """Mid-edge flattening (one complex point per edge) and uniform surface samples.
 
     source: "compute" (the project's own flattening, the default: on SCAPE it is more accurate than the course
@@ -116,7 +105,8 @@ def flatten(mesh, path, landmarks, flattened=None, samples=None, *, source: str 
     ``samples``, e.g. uniform_sample_vids.txt, when present, else fps). Note: the course's sample file lists the
     same vertex ids for every mesh, i.e. samples already in correspondence; "fps" does not use that.
     Returns {"Z": (E,2) float (x, y), "lam": (E,) local scale of the flattening, "landmark_eids": (L,),
-    "sample_eids": (S,), "edges": (E,2), "area": float, "source": str, "sample_source": str}.
+    "sample_eids": (S,), "edges": (E,2), "area": float, "source": str, "sample_source": str}, or
+    {"no_landmarks": why} (``mesh_landmarks``).
     """
     V, F = mesh["V"], mesh["F"]
     if source not in ("auto", "compute", "given"):
@@ -127,16 +117,25 @@ def flatten(mesh, path, landmarks, flattened=None, samples=None, *, source: str 
     sample_vids = None
     if sample_source in ("auto", "given") and samples:
         sample_vids, _ = read_landmarks(samples, n_vertices=len(V))
-    ids = _landmarks_on(mesh, landmarks)
+    ids, landmark_source = mesh_landmarks(mesh, landmarks, landmark_files, template_mesh)
+    if ids is None:
+        return _no_landmarks(mesh, landmark_source)
     out = mesh_features.flattening_features(V, F, ids, Z=given, sample_vids=sample_vids, n_samples=n_samples)
     return {**out, "area": float(mesh["area"]), "source": "computed" if given is None else "given",
-            "sample_source": "fps" if sample_vids is None else "given"}
+            "sample_source": "fps" if sample_vids is None else "given", "landmark_source": landmark_source}
 
 
-def _mark_truth(result: dict, n_template: int | None, n_target: int | None) -> dict:
-    """Add "no_truth" (why) to a matcher's result when the landmark truth does not apply to this test mesh."""
-    problem = measures.identity_truth_problem(n_template, n_target)
+def _mark_truth(result: dict, n_template: int | None, n_target: int | None, own_landmarks: bool = False) -> dict:
+    """Add "no_truth" (why) to a matcher's result when the landmark truth does not apply to this test mesh
+    (a mesh with its own landmark file, named like the template's, has it whatever its vertex count)."""
+    problem = None if own_landmarks else measures.identity_truth_problem(n_template, n_target)
     return {**result, "no_truth": problem} if problem else result
+
+
+def _skipped_match(target: dict) -> dict | None:
+    """A matcher's result for a test mesh without landmarks (not matched, not scored), else None."""
+    why = target.get("no_landmarks")
+    return {"no_truth": why, "no_landmarks": why, "dense_skipped": why} if why else None
 
 
 @register("corr.match_descriptor", group="correspondence", fanout="item")
@@ -146,9 +145,12 @@ def match_descriptor(template, target, landmarks, sparse_landmarks, *, descripto
 
     Returns {"all": (L,) predicted target landmark per template landmark, "sparse": (k,) within the sparse set}.
     """
+    if _skipped_match(target):
+        return _skipped_match(target)
     out = matchers.match_descriptors(template, target, _sparse_index(landmarks, sparse_landmarks),
                                      descriptor=descriptor, metric=metric)
-    return _mark_truth(out, template.get("n_vertices"), target.get("n_vertices"))
+    return _mark_truth(out, template.get("n_vertices"), target.get("n_vertices"),
+                       target.get("landmark_source") == "own")
 
 
 @register("corr.match_mrf", group="correspondence", fanout="item")
@@ -159,9 +161,12 @@ def match_mrf(template, target, landmarks, sparse_landmarks, *, sigma: float = 0
 
     Returns {"all": (L,), "sparse": (k,)}.
     """
+    if _skipped_match(target):
+        return _skipped_match(target)
     out = matchers.match_geodesic_mrf(template, target, _sparse_index(landmarks, sparse_landmarks), sigma=sigma,
                                       orientation_test=orientation)
-    return _mark_truth(out, template.get("n_vertices"), target.get("n_vertices"))
+    return _mark_truth(out, template.get("n_vertices"), target.get("n_vertices"),
+                       target.get("landmark_source") == "own")
 
 
 @register("corr.match_mobius", group="correspondence", fanout="item")
@@ -178,10 +183,12 @@ def match_mobius(template, target, template_mesh, target_mesh, landmarks, sparse
     errors need the truth "vertex i <-> vertex i", i.e. the same vertex count and faces as the template;
     otherwise they are left out and "dense_skipped" (str) says why.
     """
+    if _skipped_match(target):
+        return _skipped_match(target)
     out = matchers.match_mobius(template, target, template_mesh, target_mesh,
                                 _sparse_index(landmarks, sparse_landmarks), K=K, metric=metric, K_scale=K_scale,
                                 power=power, top=top, dense_points=dense_points)
-    return _mark_truth(out, len(template_mesh["V"]), len(target_mesh["V"]))
+    return _mark_truth(out, len(template_mesh["V"]), len(target_mesh["V"]), target.get("landmark_source") == "own")
 
 
 # (label, method input, prediction key) of each reported method, in report order
@@ -228,38 +235,48 @@ def _drop_unscorable(inputs: dict) -> tuple[dict, dict[str, str]]:
     return inputs, not_scored
 
 
+def _method_reports(inputs: dict, names: list[str], sparse_names: list[str]) -> dict:
+    """{label: ``measures.method_report``} of each course method with scorable results (``_REPORTS`` order)."""
+    reports = {}
+    for label, method, key in _REPORTS:
+        if inputs[method]:
+            preds = {mesh_name: np.asarray(r[key]) for mesh_name, r in sorted(inputs[method].items())}
+            reports[label] = measures.method_report(preds, sparse_names if key == "sparse" else names)
+    return reports
+
+
 @register("corr.evaluate", group="correspondence", fanout="once", writes_files=True)
 def evaluate(landmarks, sparse_landmarks, descriptor=None, mrf=None, mrf_oriented=None, mobius_votes=None,
-             *, out_dir: str) -> dict:
+             dense_sparse=None, dense_auto=None, dense_measures=None, *, out_dir: str) -> dict:
     """Accuracy per method (correct / all over test meshes x landmarks), per-mesh binary correspondence
     matrices (correspondences.json), accumulated frequency matrices as figures with landmark names, and the
     dense-map geodesic error curve.
 
-    Each method input is {test mesh: {"all": (L,), "sparse": (k,)}}; the truth is landmark i -> landmark i
-    (the template's and the test's landmark files list the same anatomical points in the same order).
+    Each course method input is {test mesh: {"all": (L,), "sparse": (k,)}}; the truth is landmark i ->
+    landmark i (the template's and the test's landmark files list the same anatomical points in the same order).
+    The dense methods (``shapecorr.dense``): dense_sparse / dense_auto {test mesh: corr.dense_refine result},
+    dense_measures {test mesh: corr.dense_measures result}; their landmark accuracy counts a placed landmark as
+    right when its nearest true landmark has its name ("dense", "landmark_error": ``dense_reports``).
     """
     _, names = _landmarks(landmarks)
     sparse_names = [names[i] for i in _sparse_index(landmarks, sparse_landmarks)]
     inputs = {"descriptor": descriptor, "mrf": mrf, "mrf_oriented": mrf_oriented, "mobius_votes": mobius_votes}
     inputs, not_scored = _drop_unscorable(inputs)
-    reports = {}
-    for label, method, key in _REPORTS:
-        if inputs[method]:
-            rows = sparse_names if key == "sparse" else names
-            preds = {mesh_name: np.asarray(r[key]) for mesh_name, r in sorted(inputs[method].items())}
-            reports[label] = measures.method_report(preds, rows)
-            _write_frequency_figure(label, reports[label], rows, out_dir)
+    reports = _method_reports(inputs, names, sparse_names)
+    dense_method_reports, dense_out = dense_reports(names, dense_sparse, dense_auto, dense_measures, out_dir)
+    reports.update(dense_method_reports)
+    sparse_rows = {label for label, _, key in _REPORTS if key == "sparse"}
+    for label, report in reports.items():
+        _write_frequency_figure(label, report, sparse_names if label in sparse_rows else names, out_dir)
     with open(os.path.join(out_dir, "correspondences.json"), "w", encoding="utf-8") as fh:
         json.dump({"landmarks": names, "sparse_landmarks": sparse_names,
                    "matrices": {k: r["matrices"] for k, r in reports.items()}}, fh)
     accuracy = {k: r["accuracy"] for k, r in reports.items()}
     plotting.plot_accuracy_bars(accuracy, os.path.join(out_dir, "accuracy.png"))
     out = {"accuracy": accuracy, "accuracy_per_mesh": {k: r["per_mesh"] for k, r in reports.items()},
-           "top_confusions": {k: r["confusions"] for k, r in reports.items()}}
+           "top_confusions": {k: r["confusions"] for k, r in reports.items()}, **dense_out}
     if not_scored:
         out["not_scored"] = not_scored  # {test mesh: why it has no ground truth}
     if mobius_votes:
         out.update(_dense_report(mobius_votes, out_dir))
     return out
-
-

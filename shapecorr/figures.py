@@ -26,11 +26,13 @@ def _mesh_pair(mesh: dict) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(mesh["V"]), np.asarray(mesh["F"])
 
 
-def _landmark_methods(inputs: dict) -> dict:
-    """{method: {test mesh: (L,) predictions}} of the given method inputs, test meshes with a truth only."""
+def _landmark_methods(inputs: dict, meshes: dict, n_template: int) -> dict:
+    """{method: {test mesh: (L,) predictions}} of the given method inputs, test meshes with a truth and the
+    template's vertex numbering only (the landmarks are drawn at the template's landmark ids)."""
     out = {}
     for method, results in inputs.items():
-        preds = {m: np.asarray(r["all"]) for m, r in sorted((results or {}).items()) if "no_truth" not in r}
+        preds = {m: np.asarray(r["all"]) for m, r in sorted((results or {}).items())
+                 if "no_truth" not in r and len(meshes[m]["V"]) == n_template}
         if preds:
             out[method] = preds
     return out
@@ -49,7 +51,7 @@ def landmark_figures(template_mesh, meshes, landmarks, descriptor=None, mrf=None
     """
     ids, names = read_landmarks(landmarks, n_vertices=len(template_mesh["V"]))
     methods = _landmark_methods({"descriptor": descriptor, "mrf": mrf, "mrf_oriented": mrf_oriented,
-                                 "mobius": mobius_votes})
+                                 "mobius": mobius_votes}, meshes, len(template_mesh["V"]))
     figures, shown = mesh_plots.plot_landmark_methods(
         _mesh_pair(template_mesh), {m: _mesh_pair(meshes[m]) for p in methods.values() for m in p},
         np.asarray(ids, np.int64), list(names), methods, out_dir, views=VIEWS)
@@ -57,9 +59,10 @@ def landmark_figures(template_mesh, meshes, landmarks, descriptor=None, mrf=None
 
 
 def _vertex_maps(results) -> dict:
-    """{test mesh: (n_template,) int} from {test mesh: array or {"vertex_map": array}}."""
+    """{test mesh: (n_template,) int} from {test mesh: array or {"vertex_map": array}} (results without a map,
+    e.g. a skipped mesh, are left out)."""
     return {m: np.asarray(r["vertex_map"] if isinstance(r, dict) else r, np.int64)
-            for m, r in sorted((results or {}).items())}
+            for m, r in sorted((results or {}).items()) if not isinstance(r, dict) or "vertex_map" in r}
 
 
 @register("corr.dense_figures", group="correspondence", fanout="once", writes_files=True)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from corr_core.generate import write_chair_collection, write_humanoid_dataset
+from corr_core.generate.humanoid import REMESH_KINDS
 from corr_core.generate.tables import write_table_collection
 
 from stages.registry import register
@@ -23,8 +24,13 @@ def _check_tables(*, n: int, seed: int, views: int, n_chairs: int = 0, continuou
     _at_least(0, n_chairs=n_chairs)
 
 
-def _check_humanoid(*, n_poses: int, seed: int) -> None:
+def _check_humanoid(*, n_poses: int, seed: int, vary_bodies: bool = False, remeshed: list = ()) -> None:
     _at_least(1, n_poses=n_poses)
+    bad = [k for k in remeshed if k not in REMESH_KINDS]
+    if bad:
+        raise ValueError(f"parameter 'remeshed' = {list(remeshed)}: unknown kinds {bad}; use {list(REMESH_KINDS)}")
+    if len(remeshed) > n_poses:
+        raise ValueError(f"parameter 'remeshed' = {list(remeshed)}: at most n_poses = {n_poses} kinds")
 
 
 @register("generate.chairs", kind="generator", validate=_check_chairs)
@@ -43,6 +49,10 @@ def tables(*, n: int = 12, seed: int = 0, views: int = 16, n_chairs: int = 0, co
 
 
 @register("generate.humanoid", kind="generator", validate=_check_humanoid)
-def humanoid(*, n_poses: int = 6, seed: int = 0, out_dir: str) -> None:
-    """A posed humanoid in the course's SCAPE layout: meshes/template, meshes/test, landmark files."""
-    write_humanoid_dataset(out_dir, n_poses=n_poses, seed=seed)
+def humanoid(*, n_poses: int = 6, seed: int = 0, vary_bodies: bool = False, remeshed: list = (),
+             out_dir: str) -> None:
+    """A posed humanoid in the course's SCAPE layout: meshes/template, meshes/test, landmark files.
+    ``vary_bodies``: each test mesh is another person too (limb lengths, girth, proportions; same faces).
+    ``remeshed``: kinds ("subdivided", "decimated") of extra test meshes with other connectivity, each with
+    ``ground_truth/<mesh>.txt`` and ``landmarks/<mesh>.txt``."""
+    write_humanoid_dataset(out_dir, n_poses=n_poses, seed=seed, vary_bodies=vary_bodies, remeshed=tuple(remeshed))

@@ -46,7 +46,9 @@ def _common(p: argparse.ArgumentParser, sets: bool = True) -> None:
     if sets:
         p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                        help="override a parameter: a.b=v sets params.a.b; STAGE.PARAM=v sets a stage's param")
-    p.add_argument("--cache", default=None, help="cache folder (default: the pipeline's 'cache:' or ./cache)")
+    p.add_argument("--cache", default=None, metavar="DIR|URL",
+                   help="cache folder, or an object store URL such as s3://BUCKET/PREFIX (needs the s3 extra; "
+                        "endpoint and keys from AWS_* variables) (default: the pipeline's 'cache:' or ./cache)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -99,7 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Delete cache entries that none of the given pipelines (and their recorded "
                                    "sweeps) reaches.")
     p.add_argument("pipelines", nargs="+", help="pipelines whose results to keep")
-    p.add_argument("--cache", default=None)
+    p.add_argument("--cache", default=None, metavar="DIR|URL", help="the cache folder or s3:// URL of the pipelines")
     p.add_argument("--dry-run", action="store_true", help="only report what would be removed")
     p.add_argument("--no-keep-sweeps", action="store_true", help="also remove results of recorded sweeps")
 

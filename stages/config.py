@@ -9,7 +9,7 @@ A pipeline file (YAML, read with ``yaml.safe_load`` semantics only) has the top-
     generated: {X: {generator: NAME, params: {...}}}   # datasets the project writes itself
     datasets: {D: {files: GLOB} | {groups: GLOB, pattern: REGEX} | {file: PATH} | {folder: PATH},
                optional: false}
-    stages:   {S: {function: NAME, foreach: D|S | pairs: D|S, tile: 32,
+    stages:   {S: {function: NAME, foreach: D|S | pairs: D|S, tile: 32, candidates: S,
                    inputs: {arg: SOURCE | SOURCE[item] | SOURCE[*]}, params: {...}, metrics: false}}
 
 Relative paths are relative to the current working directory. Every error names the file, the key
@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import copy
 import difflib
+import inspect
 import os
 import re
 from dataclasses import dataclass, field
@@ -28,9 +29,10 @@ import yaml
 
 from . import registry
 from .errors import PipelineError, warn_once
+from .store import cache_location
 
 TOP_KEYS = {"name", "description", "cache", "output", "params", "generated", "datasets", "stages"}
-STAGE_KEYS = {"function", "foreach", "pairs", "tile", "inputs", "params", "metrics", "description"}
+STAGE_KEYS = {"function", "foreach", "pairs", "tile", "candidates", "inputs", "params", "metrics", "description"}
 DATASET_KINDS = ("files", "groups", "file", "folder")
 DATASET_KEYS = set(DATASET_KINDS) | {"pattern", "optional", "description"}
 _REF = re.compile(r"\$\{([^}]+)\}")
@@ -65,6 +67,7 @@ class StageSpec:
     params: dict[str, Any]       # declared params with defaults filled in
     tile: int = 32
     metrics: bool = False
+    candidates: str | None = None  # pair stages on a candidate graph: the once stage that returns the pairs
 
 
 @dataclass
@@ -257,7 +260,7 @@ def load_pipeline(path: str, overrides: list[str] | tuple = (), cache_dir: str |
     else:  # from the file name, made a plain identifier
         name = re.sub(r"[^A-Za-z0-9_\-]", "_", os.path.splitext(os.path.basename(path))[0]).lstrip("-") or "pipeline"
     pipe = Pipeline(file=os.path.abspath(path), name=name,
-                    cache_dir=os.path.abspath(cache_dir or raw.get("cache") or "cache"),
+                    cache_dir=cache_location(cache_dir or raw.get("cache") or "cache"),
                     output_dir=os.path.abspath(output_dir or raw.get("output") or os.path.join("results", name)),
                     params={}, generated={}, datasets={}, stages={}, raw=raw, overrides=list(overrides))
     resolver = _Resolver(raw["params"], pipe, err)
@@ -601,13 +604,48 @@ def _read_stages(raw: dict, pipe: Pipeline, resolver: _Resolver, err) -> dict[st
         tile = resolver.resolve(st.get("tile", 32), ("stages", name, "tile"))
         if not isinstance(tile, int) or isinstance(tile, bool) or tile < 1:
             raise err("'tile' must be a positive integer", "stages", name, "tile")
-        stages[name] = StageSpec(name, fname, fanout, over, inputs, params, tile, bool(st.get("metrics", False)))
+        candidates = _read_candidates(st, name, fn, fanout, raw["stages"], names, resolver, err)
+        stages[name] = StageSpec(name, fname, fanout, over, inputs, params, tile, bool(st.get("metrics", False)),
+                                 candidates)
     return _toposort(stages, pipe, err)
+
+
+def _read_candidates(st: dict, name: str, fn: registry.StageFunction, fanout: str, raw_stages: dict,
+                     names: set[str], resolver: "_Resolver", err) -> str | None:
+    """The ``candidates:`` stage of pair stage ``name`` (None without one), checked: only with ``pairs:``, a
+    once stage, and a pair function that takes the engine argument ``pairs``."""
+    fixed = ("give the pair function a keyword-only argument 'pairs=None': it receives (p, 2) int64 local "
+             "index pairs (row of A, row of B) and returns (p, ...), one value per pair")
+    if "candidates" not in st:
+        if "pairs" in fn.engine_args and inspect.signature(fn.func).parameters["pairs"].default is inspect.Parameter.empty:
+            raise err(f"function '{fn.name}' needs candidate pairs (its argument 'pairs' has no default)",
+                      "stages", name, fix="add 'candidates: <once stage returning the pairs>', or give 'pairs' "
+                                          "the default None")
+        return None
+    cand = resolver.resolve(st["candidates"], ("stages", name, "candidates"))
+    if fanout != "pair":
+        raise err("'candidates:' is only for pair stages (with 'pairs:')", "stages", name, "candidates",
+                  fix="remove 'candidates:' or declare the stage with 'pairs: <dataset or stage>'")
+    if not isinstance(cand, str) or cand not in names:
+        raise err(f"unknown stage '{cand}'", "stages", name, "candidates", fix=_suggest(str(cand), set(raw_stages)))
+    if cand not in raw_stages:
+        raise err(f"'{cand}' is a dataset; 'candidates:' names a stage that returns the pairs", "stages", name,
+                  "candidates", fix="name a once stage returning {'names': [...], 'pairs': (P, 2) int indices}")
+    cand_function = (raw_stages[cand] or {}).get("function") if isinstance(raw_stages[cand], dict) else None
+    cand_fanout = registry.get(cand_function).fanout if cand_function in registry.names("stage") else "once"
+    if cand_fanout != "once":  # an unknown function is reported at its own stage
+        raise err(f"stage '{cand}' runs per {cand_fanout}; the candidates stage must run once", "stages", name,
+                  "candidates", fix="name a once stage returning {'names': [...], 'pairs': (P, 2) int indices}")
+    if "pairs" not in fn.engine_args:
+        raise err(f"function '{fn.name}' cannot run on candidate pairs: it has no argument 'pairs'",
+                  "stages", name, "candidates", fix=fixed)
+    return cand
 
 
 def _toposort(stages: dict[str, StageSpec], pipe: Pipeline, err) -> dict[str, StageSpec]:
     deps = {n: sorted({r.source for r in s.inputs.values() if r.source in stages} |
-                      ({s.over} if s.over in stages else set())) for n, s in stages.items()}
+                      ({s.over} if s.over in stages else set()) |
+                      ({s.candidates} if s.candidates in stages else set())) for n, s in stages.items()}
     order, state = [], {}
 
     def visit(n, trail):

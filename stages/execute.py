@@ -2,7 +2,9 @@
 
 Only misses are submitted; each task's dask key is deterministic (stage, item, key), so two runs sharing a
 scheduler share work. Tasks whose inputs turn out corrupt are invalidated and the plan is rebuilt and run
-again, with a warning.
+again, with a warning. :func:`execute_rounds` runs a plan in rounds: when a stage waits for the result of a
+candidates stage (a pair stage on a candidate graph) and this round stored it, the pipeline is planned again
+and the new misses run (like Snakemake's checkpoints).
 """
 from __future__ import annotations
 
@@ -13,11 +15,12 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 from .errors import UserError
-from .plan import Plan, Task
+from .plan import Plan, Task, build_plan
 from .store import Store
 from .worker import TaskCall, TaskResult, TaskStatus, run_task
 
@@ -41,7 +44,7 @@ class Outcome:
 def task_call(task: Task, store: Store) -> TaskCall:
     """What a worker needs to run ``task`` against ``store``."""
     return TaskCall(task.key, task.stage, task.label, task.function, task.params, task.inputs, task.item_name,
-                    store.root, task.display)
+                    store.location, task.display)
 
 
 class Progress:
@@ -152,12 +155,15 @@ def _ctrl_c_ignored_by_children():
 
 
 def execute(tasks: list[Task], store: Store, client=None, quiet: bool = False, stream=None,
-            key_suffix: str = "") -> Outcome:
+            key_suffix: str = "", prior: dict[str, TaskResult] | None = None) -> Outcome:
     """Run ``tasks`` (cache misses, in dependency order); ``client=None`` runs them in this process.
 
     key_suffix: appended to the dask keys. A repair pass after a corrupt input must not reuse the first pass's
     keys, or the scheduler may hand back the first pass's (corrupt) results instead of running the tasks again.
+    prior: results of upstream tasks run earlier in this run (an earlier round): passed to the tasks that depend
+    on them, so items that failed there are left out here too.
     """
+    prior = prior or {}
     outcome = Outcome()
     t0 = time.time()
     unique: dict[str, Task] = {}
@@ -169,7 +175,8 @@ def execute(tasks: list[Task], store: Store, client=None, quiet: bool = False, s
     progress = Progress(totals, quiet=quiet, stream=stream)
     if client is None:
         for t in unique.values():
-            ups = [outcome.results[k] for k in t.deps if k in outcome.results]
+            ups = [outcome.results[k] if k in outcome.results else prior[k] for k in t.deps
+                   if k in outcome.results or k in prior]
             res = run_task(task_call(t, store), *ups)
             outcome.results[t.key] = res
             progress.update(t.stage, res.status.succeeded)
@@ -178,7 +185,7 @@ def execute(tasks: list[Task], store: Store, client=None, quiet: bool = False, s
 
         futures = {}
         for t in unique.values():
-            ups = [futures[k] for k in t.deps if k in futures]
+            ups = [futures[k] if k in futures else prior[k] for k in t.deps if k in futures or k in prior]
             dask_key = f"{t.stage}-{t.label or 'once'}-{t.key[:16]}{key_suffix}".replace(" ", "_")
             futures[t.key] = client.submit(run_task, task_call(t, store), *ups, key=dask_key, retries=0)
         by_future = {f.key: k for k, f in futures.items()}
@@ -196,6 +203,50 @@ def execute(tasks: list[Task], store: Store, client=None, quiet: bool = False, s
             f.release()
     outcome.wall_seconds = time.time() - t0
     return outcome
+
+
+def execute_rounds(plans: list[Plan], get_client, quiet: bool = False, key_suffix: str = "",
+                   log=None) -> tuple[list[Plan], Outcome, set[str]]:
+    """Run the misses of ``plans`` (sharing one store), in rounds: after a round, a plan with a stage waiting for
+    a candidates stage whose result is now stored is planned again, and the new misses run; until no plan waits
+    for a stored result. A candidates result found damaged while planning is invalidated (with a warning) and
+    recomputed. ``get_client()`` is called only when something must run; ``log`` (print-like) gets one line per
+    round. Returns the final plans, the outcome of every task run, and the keys that were missing."""
+    outcome, missing_all = Outcome(), set()
+    for round_no in range(sum(len(pl.stages) for pl in plans) + 2):  # each round plans at least one more stage
+        plans = [_without_damaged(pl, log) for pl in plans]
+        missing = list({t.key: t for pl in plans for t in pl.missing() if t.key not in outcome.results}.values())
+        if missing:
+            missing_all |= {t.key for t in missing}
+            if log is not None:
+                counts: dict[str, int] = {}
+                for t in missing:
+                    counts[t.stage] = counts.get(t.stage, 0) + 1
+                what = ", ".join(f"{s} {n}" for s, n in counts.items())
+                log(f"running {len(missing)} task(s): {what}" if round_no == 0 else
+                    f"running {len(missing)} more task(s) now that the candidate pairs are known: {what}")
+            done = execute(missing, plans[0].store, get_client(), quiet=quiet,
+                           key_suffix=key_suffix + (f"-round{round_no}" if round_no else ""), prior=outcome.results)
+            outcome.results.update(done.results)
+            if done.corrupt():
+                break  # the caller invalidates the corrupt inputs and runs again
+        ready = [any(pl.store.has(k) for k in pl.waiting().values()) for pl in plans]
+        if not any(ready):
+            break
+        plans = [build_plan(pl.pipeline) if r else pl for pl, r in zip(plans, ready)]
+    return plans, outcome, missing_all
+
+
+def _without_damaged(plan: Plan, log) -> Plan:
+    """``plan``, planned again after invalidating the candidates results it found damaged (if any)."""
+    if not plan.damaged_candidates:
+        return plan
+    for key, error in plan.damaged_candidates.items():
+        warnings.warn(f"{error}; recomputing it", stacklevel=1)
+        if log is not None:
+            log(f"warning: {error}; recomputing it")
+        plan.store.invalidate(key)
+    return build_plan(plan.pipeline)
 
 
 _TMP_NAME = re.compile(r"^(trash-)?[0-9a-f]{32}$|^dask-worker-space$")

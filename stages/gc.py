@@ -7,7 +7,7 @@ from .errors import UserError
 from .execute import clean_tmp
 from .plan import plan_pipeline
 from .record import pipeline_id
-from .store import CACHE_MARKER, KEY_PATTERN, SEAL_NAME, Store, read_checked_json
+from .store import CACHE_MARKER, KEY_PATTERN, SEAL_NAME, Store, _disk_usage, cache_location, read_checked_json
 from .sweep import parse_grid
 
 
@@ -23,11 +23,16 @@ def gc(paths: list[str], cache_dir: str | None = None, dry: bool = False, keep_s
     for p in paths:
         plan = plan_pipeline(p, (), cache_dir, None, quiet=True)
         store = plan.store
-        if not os.path.isdir(store.root):  # no cache yet: nothing to remove
+        if not store.exists():  # no cache yet: nothing to remove
             continue
         if plan.pending_generated and not dry:  # its task keys are not known before the data exists
             raise UserError(f"{p}: generated dataset(s) {', '.join(sorted(plan.pending_generated))} not written yet, "
                             "so gc cannot tell which entries this pipeline reaches; it removes nothing",
+                            fix=f"run it first: python -m stages run {p}")
+        waiting = sorted({sp.waiting for sp in plan.stages.values() if sp.waiting})
+        if waiting and not dry:  # the tasks of a pair stage on a candidate graph are not known before its candidates
+            raise UserError(f"{p}: stage(s) wait for candidates stage(s) {', '.join(waiting)} not computed yet, so gc "
+                            "cannot tell which entries this pipeline reaches; it removes nothing",
                             fix=f"run it first: python -m stages run {p}")
         reachable |= {t.key for t in plan.tasks()}
         generated_keep |= {os.path.basename(g.path) for g in plan.pipeline.generated.values()}
@@ -44,19 +49,22 @@ def gc(paths: list[str], cache_dir: str | None = None, dry: bool = False, keep_s
                             reachable |= {t.key for t in pl.tasks()}
                         except Exception:
                             pass
-    store = store or Store(cache_dir or "cache")
-    if not os.path.exists(store.root):
+    store = store or Store(cache_location(cache_dir or "cache"))
+    if not store.exists():
         return {"kept": 0, "removed": 0, "generated_removed": 0, "bytes_freed": 0, "dry_run": dry}
     if not store.is_marked():
-        raise UserError(f"{store.root} has no {CACHE_MARKER} marker: it is not a cache the engine created, so gc "
+        raise UserError(f"{store.location} has no {CACHE_MARKER} marker: it is not a cache the engine created, so gc "
                         "removes nothing there", fix="pass the cache folder of your pipelines with --cache")
     removed = [k for k in store.all_keys() if k not in reachable]
     freed = 0
     for k in removed:
-        for path in (store.object_path(k), store.files_path(k)):
-            freed += disk_usage(path)
+        freed += store.entry_bytes(k)
         if not dry:
             store.remove(k)
+    for what, size in store.stale_writes():  # object stores: data of writes no manifest names (lost races)
+        freed += size
+        if not dry:
+            store.remove_stale(what)
     gen_dir = os.path.join(store.root, "generated")
     gen_removed = [g for g in (os.listdir(gen_dir) if os.path.isdir(gen_dir) else [])
                    if g not in generated_keep and KEY_PATTERN.match(g)
@@ -72,12 +80,5 @@ def gc(paths: list[str], cache_dir: str | None = None, dry: bool = False, keep_s
 
 
 def disk_usage(path: str) -> int:
-    """Bytes of all files under ``path`` (0 if it does not exist)."""
-    total = 0
-    for dirpath, _, files in os.walk(path):
-        for f in files:
-            try:
-                total += os.path.getsize(os.path.join(dirpath, f))
-            except OSError:
-                pass
-    return total
+    """Bytes of all files under the local folder ``path`` (0 if it does not exist)."""
+    return _disk_usage(path)

@@ -8,7 +8,11 @@ materialises them with ``load(store)``. Each kind is defined here once.
 * :class:`EntryInput`: the stored result of one upstream task;
 * :class:`DictInput`: ``{item: value}`` of a per-item collection;
 * :class:`StackInput`: the values of several items stacked into one array ``(n, ...)`` (pair tiles);
-* :class:`PairsInput`: the whole ``(N, N, ...)`` matrix of a pair stage, assembled from its tiles.
+* :class:`PairsInput`: the whole ``(N, N, ...)`` matrix of a pair stage, assembled from its tiles;
+* :class:`IndexPairsInput`: the ``(p, 2)`` local index pairs one task of a pair stage on a candidate graph
+  computes (passed to the pair function as ``pairs``);
+* :class:`SparsePairsInput`: the result of a pair stage on a candidate graph, ``{"names", "pairs", "values"}``
+  (never an N x N array), assembled from its tasks.
 """
 from __future__ import annotations
 
@@ -152,4 +156,82 @@ def partial_tile(block: Any, rows: list[int], cols: list[int]) -> dict:
     return {"partial_tile": {"rows": list(rows), "cols": list(cols)}, "block": block}
 
 
-InputSpec = Union[ValueInput, EntryInput, DictInput, StackInput, PairsInput]
+def partial_pairs(values: Any, kept: list[int]) -> dict:
+    """The stored form of a candidate-pair task computed without some of its items: ``values`` (p', ...) for its
+    pairs at positions ``kept`` (indices into the task's pairs), or None when no pair kept both items."""
+    return {"partial_pairs": {"kept": list(kept)}, "values": values}
+
+
+@dataclass(frozen=True, eq=False)
+class IndexPairsInput:
+    """The pairs one task of a candidate pair stage computes: ``pairs`` (p, 2) int64 (row of A, row of B),
+    identified by ``digest`` (a hash of the array). Loaded as the array itself."""
+    pairs: np.ndarray
+    digest: str
+
+    def key(self) -> Any:
+        return self.digest
+
+    def deps(self) -> list[str]:
+        return []
+
+    def load(self, store: "Store") -> np.ndarray:
+        return self.pairs.copy()
+
+
+@dataclass(frozen=True, eq=False)
+class SparsePairsInput:
+    """A pair stage's result on a candidate graph: one value per candidate pair, never an N x N array.
+
+    names: the N item names (sorted); pairs: (P, 2) int64 global indices into ``names``, i < j, rows sorted;
+    tasks: ``(start, end, task key)``: the task that computed rows start:end of ``pairs``, in row order;
+    candidates: the key of the candidates stage's result (its left-out items are inherited);
+    digest: a hash of ``pairs``; function: the registered pair function (its ``mirror`` gives the (j, i) values).
+    """
+    names: tuple[str, ...]
+    pairs: np.ndarray
+    tasks: tuple[tuple[int, int, str], ...]
+    candidates: str
+    digest: str
+    function: str
+
+    def key(self) -> Any:
+        return {"names": list(self.names), "pairs": self.digest, "tasks": [list(t) for t in self.tasks],
+                "candidates": self.candidates, "function": self.function}
+
+    def deps(self) -> list[str]:
+        return [self.candidates] + [t[2] for t in self.tasks]
+
+    def load(self, store: "Store", drop: frozenset[str] = frozenset()) -> dict:
+        """{"names": [n names], "pairs": (P', 2) int64 indices into names (i < j, sorted), "values": (P', ...)}.
+
+        drop: item names left out (they failed upstream): removed from ``names`` with their pairs, and the
+        remaining pairs renumbered. A task computed without some items is stored as
+        ``{"partial_pairs": {"kept"}, "values"}`` (see :func:`partial_pairs`); its other pairs are left out."""
+        computed = np.zeros(len(self.pairs), dtype=bool)
+        parts: list[tuple[np.ndarray, np.ndarray]] = []   # (row indices into pairs, values)
+        for start, end, key in self.tasks:
+            stored, rows = store.get(key), np.arange(start, end)
+            if isinstance(stored, dict) and "partial_pairs" in stored:
+                rows = rows[np.asarray(stored["partial_pairs"]["kept"], dtype=np.int64)]
+                stored = stored["values"]
+                if stored is None:
+                    continue
+            parts.append((rows, np.asarray(stored)))
+            computed[rows] = True
+        keep_item = np.array([name not in drop for name in self.names], dtype=bool)
+        keep_row = computed & keep_item[self.pairs[:, 0]] & keep_item[self.pairs[:, 1]] if len(self.pairs) else computed
+        if parts:
+            first = parts[0][1]
+            values = np.zeros((len(self.pairs),) + first.shape[1:], dtype=first.dtype)
+            for rows, v in parts:
+                values[rows] = v
+            values = values[keep_row]
+        else:
+            values = np.zeros((0,), dtype=np.float32)
+        renumber = np.cumsum(keep_item) - 1
+        pairs = renumber[self.pairs[keep_row]].astype(np.int64).reshape(-1, 2)
+        return {"names": [n for n, k in zip(self.names, keep_item) if k], "pairs": pairs, "values": values}
+
+
+InputSpec = Union[ValueInput, EntryInput, DictInput, StackInput, PairsInput, IndexPairsInput, SparsePairsInput]

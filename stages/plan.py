@@ -5,7 +5,10 @@ inputs). Input keys chain (an upstream task's key stands for its result), so big
 re-hashed; raw input files are hashed by content, with a (size, mtime) cache so unchanged files are not
 read again. The caches (input file hashes, code fingerprints) are written by ``run`` only
 (:meth:`Plan.save_caches`); stages that read a generated dataset not written yet are planned without tasks
-(``StagePlan.pending``) until ``run`` has generated it.
+(``StagePlan.pending``) until ``run`` has generated it. Likewise a pair stage on a candidate graph
+(``candidates: STAGE``) and the stages downstream of it wait (``StagePlan.waiting``) until STAGE's result is in
+the cache: its tasks are the candidate pairs that result names (``run`` executes in rounds, planning again
+when such a result lands, like Snakemake's checkpoints).
 """
 from __future__ import annotations
 
@@ -16,13 +19,16 @@ import os
 import re
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from . import fingerprint, registry
 from .config import DatasetSpec, GeneratedPath, InputRef, Pipeline, StageSpec, load_pipeline
-from .errors import PipelineError, warn_once
+from .errors import CorruptEntry, PipelineError, warn_once
 from .fingerprint import code_fingerprint
 from .generated import resolve_generated
-from .inputs import DictInput, EntryInput, InputSpec, PairsInput, StackInput, ValueInput
-from .store import Store, digest_json, file_checksum, read_checked_json, write_checked_json
+from .inputs import (DictInput, EntryInput, IndexPairsInput, InputSpec, PairsInput, SparsePairsInput, StackInput,
+                     ValueInput)
+from .store import Store, digest_bytes, digest_json, file_checksum, read_checked_json, write_checked_json
 
 KEY_VERSION = 1
 
@@ -70,6 +76,7 @@ class SourceKind(enum.Enum):
     ENTRY = "entry"      # the result of a once stage
     PAIRS = "pairs"      # the tiles of a pair stage
     PENDING = "pending"  # not known until a generated dataset is written (by run)
+    WAITING = "waiting"  # not known until a candidates stage's result is in the cache (run plans again then)
     SKIPPED = "skipped"  # nothing to offer: an optional dataset that is absent or empty, or a skipped stage
 
 
@@ -79,8 +86,10 @@ class Source:
     kind: SourceKind
     items: dict[str, InputSpec] = field(default_factory=dict)   # ITEMS: item name -> input
     single: InputSpec | None = None                             # VALUE, ENTRY
-    pairs: PairsInput | None = None                             # PAIRS
+    pairs: PairsInput | SparsePairsInput | None = None          # PAIRS (complete, or on a candidate graph)
     pending: str | None = None                                  # PENDING: the generated dataset waited for
+    waiting: str | None = None                                  # WAITING: the candidates stage waited for
+    waiting_detail: str = ""                                    # WAITING: why its result is not usable yet
     skipped: str | None = None                                  # SKIPPED: why (shown by run and status)
 
     def item_names(self) -> list[str]:
@@ -115,6 +124,8 @@ class StagePlan:
     input_items: dict[str, dict[str, str]] = field(default_factory=dict)
     pending: str | None = None  # a generated dataset this stage needs and run has not written yet (no tasks)
     skipped: str | None = None  # why this stage has no tasks: an input it needs is absent (see SourceKind.SKIPPED)
+    waiting: str | None = None  # the candidates stage whose result is not in the cache yet (no tasks until it is)
+    waiting_detail: str = ""    # why that result is not usable yet ("not computed yet", or that it is damaged)
 
 
 @dataclass
@@ -125,6 +136,12 @@ class Plan:
     datasets: dict[str, Source]
     pending_generated: dict[str, str] = field(default_factory=dict)  # name -> why it is not usable yet
     hasher: "FileHasher | None" = None
+    damaged_candidates: dict[str, str] = field(default_factory=dict)  # key -> error: stored but unreadable
+
+    def waiting(self) -> dict[str, str]:
+        """{candidates stage: its task key} for every candidates stage some stage waits for."""
+        names = {sp.waiting for sp in self.stages.values() if sp.waiting is not None}
+        return {n: self.stages[n].tasks[0].key for n in sorted(names) if self.stages[n].tasks}
 
     def tasks(self) -> list[Task]:
         return [t for sp in self.stages.values() for t in sp.tasks]
@@ -155,11 +172,12 @@ def build_plan(pipe: Pipeline) -> Plan:
     datasets = {name: _dataset_source(pipe, ds, hasher) for name, ds in pipe.datasets.items()}
     sources: dict[str, Source] = dict(datasets)
     stages: dict[str, StagePlan] = {}
+    damaged: dict[str, str] = {}
     for name, spec in pipe.stages.items():
-        sp = _plan_stage(pipe, spec, sources)
+        sp = _plan_stage(pipe, spec, sources, store, damaged)
         stages[name] = sp
         sources[name] = sp.source
-    return Plan(pipe, store, stages, datasets, pending, hasher)
+    return Plan(pipe, store, stages, datasets, pending, hasher, damaged)
 
 
 def plan_pipeline(path: str, overrides=(), cache_dir=None, output_dir=None, quiet=False) -> Plan:
@@ -321,9 +339,15 @@ def make_blocks(names: list[str], tile: int) -> list[tuple[int, int]]:
     return blocks
 
 
+def _refs(spec: StageSpec) -> list[InputRef]:
+    """Every source ``spec`` reads: its inputs, what it runs over and its candidates stage."""
+    return [*spec.inputs.values(), *([InputRef(spec.over)] if spec.over else []),
+            *([InputRef(spec.candidates)] if spec.candidates else [])]
+
+
 def _pending_of(spec: StageSpec, sources: dict[str, Source]) -> str | None:
     """The generated dataset (not written yet) that ``spec`` waits for, through its inputs or params."""
-    for ref in [*spec.inputs.values(), *([InputRef(spec.over)] if spec.over else [])]:
+    for ref in _refs(spec):
         if sources[ref.source].kind is SourceKind.PENDING:
             return sources[ref.source].pending
     stack = list(spec.params.values())
@@ -339,8 +363,9 @@ def _skipped_of(spec: StageSpec, fn: registry.StageFunction, sources: dict[str, 
     """Why ``spec`` cannot run, when what it runs over or a required input is skipped (an optional dataset
     that is absent or empty, or a stage skipped for that reason); None when it can. An optional input of the
     function (``other=None``) wired to a skipped source is passed as None instead."""
-    if spec.over is not None and sources[spec.over].kind is SourceKind.SKIPPED:
-        return sources[spec.over].skipped  # the root cause (a skipped stage passes its own on)
+    for over in (spec.over, spec.candidates):
+        if over is not None and sources[over].kind is SourceKind.SKIPPED:
+            return sources[over].skipped  # the root cause (a skipped stage passes its own on)
     for arg, ref in spec.inputs.items():
         src = sources[ref.source]
         if src.kind is SourceKind.SKIPPED and arg not in fn.optional_inputs:
@@ -359,7 +384,17 @@ def _stage_code(fn: registry.StageFunction) -> tuple[str, dict[str, str]]:
     return code, parts
 
 
-def _plan_stage(pipe: Pipeline, spec: StageSpec, sources: dict[str, Source]) -> StagePlan:
+def _waiting_of(spec: StageSpec, sources: dict[str, Source]) -> tuple[str, str] | None:
+    """(candidates stage, detail) when ``spec`` reads a stage that waits for a candidates stage's result."""
+    for ref in _refs(spec):
+        src = sources[ref.source]
+        if src.kind is SourceKind.WAITING:
+            return src.waiting, src.waiting_detail
+    return None
+
+
+def _plan_stage(pipe: Pipeline, spec: StageSpec, sources: dict[str, Source], store: Store,
+                damaged: dict[str, str]) -> StagePlan:
     fn = registry.get(spec.function)
     code, parts = _stage_code(fn)
     pending = _pending_of(spec, sources)
@@ -368,6 +403,14 @@ def _plan_stage(pipe: Pipeline, spec: StageSpec, sources: dict[str, Source]) -> 
     skipped = _skipped_of(spec, fn, sources)
     if skipped is not None:
         return StagePlan(spec, code, parts, [], Source(SourceKind.SKIPPED, skipped=skipped), {}, skipped=skipped)
+    waiting = _waiting_of(spec, sources)
+    candidates = None
+    if waiting is None and spec.candidates is not None:
+        candidates, detail = _read_candidates(pipe, spec, sources, store, damaged)
+        waiting = None if candidates is not None else (spec.candidates, detail)
+    if waiting is not None:  # planned once run has computed the candidates stage
+        source = Source(SourceKind.WAITING, waiting=waiting[0], waiting_detail=waiting[1])
+        return StagePlan(spec, code, parts, [], source, {}, waiting=waiting[0], waiting_detail=waiting[1])
     tasks: list[Task] = []
 
     def add_task(label: str, inputs: dict[str, InputSpec], item_name: str | None) -> str:
@@ -390,6 +433,8 @@ def _plan_stage(pipe: Pipeline, spec: StageSpec, sources: dict[str, Source]) -> 
             inputs = {arg: _resolve_input(spec, arg, ref, sources, item, pipe) for arg, ref in spec.inputs.items()}
             out[item] = EntryInput(add_task(item, inputs, item))
         source = Source(SourceKind.ITEMS, items=out)
+    elif spec.fanout == "pair" and candidates is not None:
+        source = _plan_candidate_pairs(pipe, spec, sources, candidates, add_task)
     elif spec.fanout == "pair":
         over = sources[spec.over]
         if over.kind is not SourceKind.ITEMS:
@@ -419,3 +464,126 @@ def _plan_stage(pipe: Pipeline, spec: StageSpec, sources: dict[str, Source]) -> 
 def canonical_key(spec: InputSpec) -> str:
     """An input's identity as JSON text (recorded per item, to name which items of a collection changed)."""
     return json.dumps(spec.key())
+
+
+# ---------------------------------------------------------------------------------------------
+# pair stages on a candidate graph (``candidates: STAGE``)
+# ---------------------------------------------------------------------------------------------
+CANDIDATES_FORMAT = "{'names': [M item names], 'pairs': (P, 2) integer indices into names, i != j}"
+
+
+def _read_candidates(pipe: Pipeline, spec: StageSpec, sources: dict[str, Source], store: Store,
+                     damaged: dict[str, str]) -> tuple[tuple[str, np.ndarray] | None, str]:
+    """((candidates key, (P, 2) int64 global pairs), "") when the candidates stage's result is in the cache,
+    else (None, why not). A stored result that cannot be read is recorded in ``damaged`` (run recomputes it)."""
+    src = sources[spec.candidates]
+    if src.kind is not SourceKind.ENTRY:
+        raise PipelineError(f"'{spec.candidates}' does not run once, so it cannot give the candidate pairs",
+                            file=pipe.file, key=f"stages.{spec.name}.candidates",
+                            fix=f"name a once stage returning {CANDIDATES_FORMAT}")
+    over = sources[spec.over]
+    if over.kind is not SourceKind.ITEMS:
+        raise PipelineError(f"cannot pair the items of '{spec.over}': it is not a collection",
+                            file=pipe.file, key=f"stages.{spec.name}.pairs")
+    key = src.single.entry
+    if not store.has(key):
+        return None, "not computed yet"
+    try:
+        value = store.get(key)
+    except CorruptEntry as exc:
+        damaged[key] = str(exc)
+        return None, "its stored result is damaged; run recomputes it"
+    try:
+        pairs = candidate_pairs(value, list(over.items), spec.over)
+    except ValueError as exc:
+        cand_fn = pipe.stages[spec.candidates].function
+        raise PipelineError(f"stage '{spec.candidates}' ({cand_fn}) returned unusable candidate pairs for the pair "
+                            f"stage '{spec.name}': {exc}", file=pipe.file, key=f"stages.{spec.name}.candidates",
+                            fix=f"make {cand_fn} return {CANDIDATES_FORMAT}") from None
+    return (key, pairs), ""
+
+
+def candidate_pairs(value, items: list[str], over: str) -> np.ndarray:
+    """The candidate pairs a candidates stage returned, checked and made canonical.
+
+    value: ``{"names": [M names], "pairs": (P, 2) int}`` (other keys ignored); items: the N sorted item names of
+    the paired stage ``over``. Returns (P', 2) int64 indices into ``items``, each row (lo, hi) with lo < hi,
+    rows sorted and unique ((i, j) and (j, i) are one pair). Raises ValueError saying what is wrong.
+    """
+    if not isinstance(value, dict) or "names" not in value or "pairs" not in value:
+        got = f"a dict with keys {sorted(value)}" if isinstance(value, dict) else f"a {type(value).__name__}"
+        raise ValueError(f"it returned {got}, not a dict with the keys 'names' and 'pairs'")
+    position = {n: i for i, n in enumerate(items)}
+    to_item = np.array([position[n] for n in _checked_names(value["names"], position, over)], dtype=np.int64)
+    pairs = _checked_pairs(value["pairs"], len(to_item))
+    if not len(pairs):
+        return np.zeros((0, 2), dtype=np.int64)
+    global_pairs = to_item[pairs]
+    canonical = np.stack([global_pairs.min(axis=1), global_pairs.max(axis=1)], axis=1)
+    return np.unique(canonical, axis=0).astype(np.int64).reshape(-1, 2)
+
+
+def _checked_names(names, position: dict[str, int], over: str) -> list[str]:
+    """The candidates' ``names`` as a list: distinct item names of ``over`` (ValueError otherwise)."""
+    names = names.tolist() if isinstance(names, np.ndarray) else names
+    if not isinstance(names, (list, tuple)) or not all(isinstance(n, str) for n in names):
+        raise ValueError("'names' must be a list of item names (str)")
+    if len(set(names)) != len(names):
+        seen: set[str] = set()
+        twice = sorted({n for n in names if n in seen or seen.add(n)})[:5]
+        raise ValueError(f"'names' lists {', '.join(map(repr, twice))} more than once")
+    unknown = [n for n in names if n not in position]
+    if unknown:
+        raise ValueError(f"'names' has {len(unknown)} name(s) that are not items of '{over}': "
+                         f"{', '.join(map(repr, unknown[:5]))}{' ...' if len(unknown) > 5 else ''}")
+    return list(names)
+
+
+def _checked_pairs(pairs, n_names: int) -> np.ndarray:
+    """The candidates' ``pairs`` as (P, 2) int64 indices in 0..n_names-1 with i != j (ValueError otherwise)."""
+    pairs = np.asarray(pairs)
+    if pairs.ndim != 2 or pairs.shape[1] != 2:
+        raise ValueError(f"'pairs' has shape {pairs.shape}, expected (P, 2)")
+    if pairs.size and pairs.dtype.kind not in "iu":
+        raise ValueError(f"'pairs' must hold integer indices into 'names', got dtype {pairs.dtype}")
+    pairs = pairs.astype(np.int64)
+    bad = np.flatnonzero(((pairs < 0) | (pairs >= n_names)).any(axis=1))
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(f"pair {i} is {tuple(pairs[i].tolist())}: an index outside 0..{n_names - 1} "
+                         f"(len(names) = {n_names}; {bad.size} such pair(s))")
+    same = np.flatnonzero(pairs[:, 0] == pairs[:, 1])
+    if same.size:
+        i = int(same[0])
+        raise ValueError(f"pair {i} is {tuple(pairs[i].tolist())}: an item paired with itself "
+                         f"({same.size} such pair(s))")
+    return pairs
+
+
+def _index_digest(pairs: np.ndarray) -> str:
+    return digest_bytes(np.ascontiguousarray(pairs, dtype="<i8").tobytes())
+
+
+def _plan_candidate_pairs(pipe: Pipeline, spec: StageSpec, sources: dict[str, Source],
+                          candidates: tuple[str, np.ndarray], add_task) -> Source:
+    """The tasks of a pair stage on a candidate graph: the pairs grouped by the block (make_blocks) of their
+    first item; per block one task with A = the distinct first items, B = the distinct partners and the local
+    index pairs. A task's key depends only on its items and its pairs."""
+    cand_key, pairs = candidates
+    over = sources[spec.over]
+    names = list(over.items)
+    tasks = []
+    for s0, e0 in make_blocks(names, spec.tile):
+        r0, r1 = (int(r) for r in np.searchsorted(pairs[:, 0], [s0, e0]))
+        if r0 == r1:
+            continue
+        mine = pairs[r0:r1]
+        a_idx, b_idx = np.unique(mine[:, 0]), np.unique(mine[:, 1])
+        local = np.stack([np.searchsorted(a_idx, mine[:, 0]), np.searchsorted(b_idx, mine[:, 1])], axis=1)
+        local = local.astype(np.int64)
+        inputs = {"A": StackInput(tuple(over.items[names[i]] for i in a_idx)),
+                  "B": StackInput(tuple(over.items[names[i]] for i in b_idx)),
+                  "pairs": IndexPairsInput(local, _index_digest(local))}
+        tasks.append((r0, r1, add_task(f"pairs {names[s0]}..{names[e0 - 1]}", inputs, None)))
+    return Source(SourceKind.PAIRS, pairs=SparsePairsInput(tuple(names), pairs, tuple(tasks), cand_key,
+                                                           _index_digest(pairs), spec.function))

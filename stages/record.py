@@ -153,7 +153,7 @@ def _input_changes(plan: Plan, task: Task, prev_task: dict, prev_stage: dict) ->
         if prev_task["inputs"].get(arg) == digest:
             continue
         ref = sp.spec.inputs.get(arg)
-        src = ref.source if ref else arg
+        src = ref.source if ref else sp.spec.candidates if arg == "pairs" and sp.spec.candidates else arg
         old_items, new_items = prev_stage.get("input_items", {}).get(arg), sp.input_items.get(arg)
         if old_items is not None and new_items is not None:
             out.append(InputChange(
@@ -188,7 +188,7 @@ def explain(task: Task, plan: Plan, record: dict | None) -> Reason:
         failed = {(f.get("stage"), f.get("item")) for f in record.get("summary", {}).get("failures", [])}
         if (task.stage, task.label) in failed:
             return Reason(missing="failed")
-        return Reason(missing="corrupt" if os.path.exists(plan.store.manifest_path(task.key)) else "missing")
+        return Reason(missing="corrupt" if plan.store.manifest_exists(task.key) else "missing")
     old_parts, new_parts = prev_stage.get("code_parts", {}), sp.code_parts
     old_params, new_params = prev_stage["params"], sp.spec.params
     return Reason(

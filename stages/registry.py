@@ -20,12 +20,15 @@ A registered function declares its interface through its signature:
 * positional (or positional-or-keyword) arguments are **inputs** wired in the YAML ``inputs:``; those with a
   default (``ground_truth=None``) are optional and may be left unwired;
 * keyword-only arguments are **params**; their defaults and annotations give types for validation;
-* the keyword-only names ``item_name`` (the item being processed) and ``out_dir`` (a folder for files the
-  stage publishes, for ``writes_files=True``) are supplied by the engine.
+* the keyword-only names ``item_name`` (the item being processed), ``out_dir`` (a folder for files the
+  stage publishes, for ``writes_files=True``) and, for pair functions, ``pairs`` (the ``(p, 2)`` local index
+  pairs of a stage on a candidate graph, see below) are supplied by the engine.
 
 Fan-out: ``"item"`` functions run once per item (``foreach:``), ``"pair"`` functions take two stacks
 ``A: (a, ...)`` and ``B: (b, ...)`` and return ``(a, b, ...)`` (``pairs:``, executed in tiles; ``mirror``
-turns an (a,b,...) block into the (b,a,...) block), ``"once"`` functions run once.
+turns an (a,b,...) block into the (b,a,...) block), ``"once"`` functions run once. A pair function that also
+takes ``pairs=None`` can run on a candidate graph (``candidates:`` in YAML): it then receives ``pairs``, a
+``(p, 2)`` int64 array of (row of A, row of B), and returns ``(p, ...)``, one value per pair.
 """
 from __future__ import annotations
 
@@ -40,7 +43,7 @@ from typing import Any, Callable, Iterable
 
 from .errors import PipelineError
 
-ENGINE_ARGS = ("item_name", "out_dir")
+ENGINE_ARGS = ("item_name", "out_dir", "pairs")
 ENTRY_POINT_GROUP = "stages.plugins"
 PLUGINS_ENV = "STAGES_PLUGINS"
 
@@ -193,6 +196,8 @@ def register(name: str, fanout: str = "once", mirror: Callable | None = None, wr
                 raise TypeError(f"{name}: *args/**kwargs are not allowed in registered functions")
         if fanout == "pair" and inputs != ["A", "B"]:
             raise TypeError(f"{name}: a pair function takes exactly the inputs (A, B)")
+        if "pairs" in engine and fanout != "pair":
+            raise TypeError(f"{name}: only a pair function (fanout='pair') takes the engine argument 'pairs'")
         if kind == "generator" and "out_dir" not in engine:
             raise TypeError(f"{name}: a generator takes out_dir")
         if name in _REGISTRY and _REGISTRY[name].func.__qualname__ != func.__qualname__:

@@ -19,7 +19,7 @@ def metrics(plan: Plan) -> dict:
     for name, sp in plan.stages.items():
         if not sp.spec.metrics:
             continue
-        if sp.pending is not None:
+        if sp.pending is not None or sp.waiting is not None:  # no tasks yet: generated data or candidates to come
             missing.append(name)
         if sp.skipped is not None:
             merged.setdefault("_skipped", {})[name] = sp.skipped

@@ -14,7 +14,7 @@ import time
 import warnings
 
 from .errors import CorruptEntry, UserError
-from .execute import clean_tmp, execute
+from .execute import clean_tmp, execute_rounds
 from .generated import write_generated
 from .plan import Plan, build_plan, plan_pipeline
 from .publish import publish, verify_published
@@ -52,6 +52,8 @@ def stage_summary(plan: Plan, outcome_results: dict[str, TaskResult], missing_ke
         }
         if sp.skipped is not None:  # the stage has no tasks: an input it needs is absent
             out[name]["skipped_stage"] = sp.skipped
+        if sp.waiting is not None:  # no tasks: the candidates stage it waits for did not succeed
+            out[name]["waiting_for"] = sp.waiting
     return out
 
 
@@ -95,19 +97,12 @@ def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None,
           else given_client(client_getter)) as get_client:
         verified: dict[str, dict[str, str]] = {}
         for attempt in range(max_repairs + 1):
-            missing = plan.missing()
-            missing_all |= {t.key for t in missing}
-            corrupt: list[tuple[str, str]] = []  # (key, what is wrong)
-            if missing:
-                if attempt == 0:
-                    reasons: dict[str, int] = {}
-                    for t in missing:
-                        reasons[t.stage] = reasons.get(t.stage, 0) + 1
-                    log(f"running {len(missing)} task(s): " + ", ".join(f"{s} {n}" for s, n in reasons.items()))
-                outcome = execute(missing, plan.store, get_client(), quiet=quiet,
-                                  key_suffix=f"-repair{attempt}" if attempt else "")
-                results.update(outcome.results)
-                corrupt = [(r.corrupt_key, r.error) for r in outcome.corrupt()]
+            # in rounds: stages waiting for a candidates stage are planned (and run) once its result is stored
+            (plan,), outcome, missing = execute_rounds([plan], get_client, quiet=quiet, log=log if attempt == 0 else None,
+                                                       key_suffix=f"-repair{attempt}" if attempt else "")
+            missing_all |= missing
+            results.update(outcome.results)
+            corrupt: list[tuple[str, str]] = [(r.corrupt_key, r.error) for r in outcome.corrupt()]  # (key, what)
             if not corrupt:  # the files to publish are checked before publishing: a bad one is recomputed now
                 verified, bad = verify_published(plan)
                 corrupt = [(exc.key, str(exc)) for exc in bad]

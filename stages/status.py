@@ -7,7 +7,8 @@ from .record import load_record, pending_reason, reason
 
 def dry_run(plan: Plan) -> list[dict]:
     """The tasks that would execute: ``[{"stage", "label", "key", "reason"}]`` in plan order; a stage that
-    waits for a generated dataset (its tasks are planned once run has written it) is one row with key None."""
+    waits for a generated dataset (its tasks are planned once run has written it), or for the result of a
+    candidates stage (a pair stage on a candidate graph and what is downstream of it), is one row with key None."""
     record = load_record(plan)
     missing = {t.key for t in plan.missing()}
     rows = []
@@ -16,9 +17,20 @@ def dry_run(plan: Plan) -> list[dict]:
             rows.append({"stage": name, "label": "", "key": None, "reason": pending_reason(plan, name).text()})
         if sp.skipped is not None:
             rows.append({"stage": name, "label": "", "key": None, "reason": f"skipped: {sp.skipped}"})
+        if sp.waiting is not None:
+            rows.append({"stage": name, "label": "", "key": None, "reason": waiting_reason(plan, name)})
         rows += [{"stage": t.stage, "label": t.label, "key": t.key, "reason": reason(t, plan, record)}
                  for t in sp.tasks if t.key in missing]
     return rows
+
+
+def waiting_reason(plan: Plan, stage: str) -> str:
+    """Why a stage has no tasks yet: it waits for the result of a candidates stage."""
+    sp = plan.stages[stage]
+    own = sp.spec.candidates == sp.waiting
+    what = ("its tasks are the candidate pairs that stage returns" if own else
+            "it reads a pair stage whose tasks are the candidate pairs that stage returns")
+    return f"once stage '{sp.waiting}' has run ({what}; {sp.waiting_detail or 'not computed yet'})"
 
 
 def format_dry_run(plan: Plan, rows: list[dict], limit_per_stage: int = 8) -> str:
@@ -36,6 +48,9 @@ def format_dry_run(plan: Plan, rows: list[dict], limit_per_stage: int = 8) -> st
         if sp.skipped is not None:
             lines.append(f"{name}: skipped ({sp.skipped})")
             continue
+        if sp.waiting is not None:
+            lines.append(f"{name}: would run {todo[0]['reason']}")
+            continue
         lines.append(f"{name}: {len(todo)} of {total[name]} task(s) would run" + ("" if todo else " (all cached)"))
         groups: dict[str, list[str]] = {}
         for r in todo:
@@ -46,9 +61,12 @@ def format_dry_run(plan: Plan, rows: list[dict], limit_per_stage: int = 8) -> st
             lines.append(f"    {shown}: {why}")
     n_tasks = sum(r["key"] is not None for r in rows)
     waiting = [n for n, sp in plan.stages.items() if sp.pending is not None]
+    checkpoints = sorted({sp.waiting for sp in plan.stages.values() if sp.waiting is not None})
+    n_waiting = sum(sp.waiting is not None for sp in plan.stages.values())
     lines.append(f"total: {n_tasks} task(s) would run, {sum(total.values()) - n_tasks} cached"
                  + (f"; {len(waiting)} stage(s) planned once run has generated "
-                    f"{', '.join(sorted(plan.pending_generated))}" if waiting else ""))
+                    f"{', '.join(sorted(plan.pending_generated))}" if waiting else "")
+                 + (f"; {n_waiting} stage(s) planned once {', '.join(checkpoints)} has run" if checkpoints else ""))
     return "\n".join(lines)
 
 
@@ -60,8 +78,12 @@ def status(path: str, overrides=(), cache_dir=None) -> list[dict]:
     for name, sp in plan.stages.items():
         mine = [r for r in rows if r["stage"] == name]
         todo = [r for r in mine if r["key"] is not None]
-        to_run = len(todo) if sp.pending is None else None      # None: not known before generating
-        out.append({"stage": name, "function": sp.spec.function, "fanout": sp.spec.fanout, "tasks": len(sp.tasks),
-                    "cached": len(sp.tasks) - len(todo) if to_run is not None else 0, "to_run": to_run,
-                    "reasons": sorted({r["reason"] for r in mine}), "skipped": sp.skipped})
+        known = sp.pending is None and sp.waiting is None
+        to_run = len(todo) if known else None      # None: not known before generating / the candidates exist
+        row = {"stage": name, "function": sp.spec.function, "fanout": sp.spec.fanout, "tasks": len(sp.tasks),
+               "cached": len(sp.tasks) - len(todo) if to_run is not None else 0, "to_run": to_run,
+               "reasons": sorted({r["reason"] for r in mine}), "skipped": sp.skipped}
+        if sp.waiting is not None:
+            row["waiting_for"] = sp.waiting
+        out.append(row)
     return out

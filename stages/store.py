@@ -20,6 +20,9 @@ included): a truncated, non-UTF-8, edited or foreign manifest counts as missing 
 is recomputed), so ``has()`` and ``get()`` agree. The engine's small JSON tables (``filehash.json``,
 ``fingerprints.json``, ``runs/*.json``) are written and read the same way (:func:`write_checked_json`,
 :func:`read_checked_json`).
+
+A cache URL (``s3://bucket/prefix``, any fsspec protocol) keeps the entries on object storage instead
+(``Store(url)`` is then a :class:`stages.object_store.ObjectStore`, see there): same keys, same checks.
 """
 from __future__ import annotations
 
@@ -204,6 +207,29 @@ def _encode(value: Any, arrays: dict[str, np.ndarray]) -> Any:
     raise TypeError(f"cannot store a value of type {type(value).__name__}")
 
 
+
+def read_checked_arrays(key: str, arrays_meta: dict, verify: bool, open_store,
+                        zarr_format: int | None = None) -> dict[str, np.ndarray]:
+    """{name: array} of an entry's arrays, each read from ``open_store(name)`` (a zarr store) and checked
+    against its manifest record ``arrays_meta[name]`` ({"shape", "sha"}; the checksum only when ``verify``);
+    ``zarr_format`` None lets zarr detect it (an object store passes 3 to save the probing requests).
+
+    Raises:
+        CorruptEntry: an array is missing, unreadable, or does not match its record.
+    """
+    import zarr
+
+    arrays = {}
+    for name, meta in arrays_meta.items():
+        try:
+            arr = np.asarray(zarr.open_array(store=open_store(name), mode="r", zarr_format=zarr_format)[...])
+        except Exception as exc:  # missing objects or chunk files, bad metadata, decompression errors
+            raise CorruptEntry(key, f"array {name}: {type(exc).__name__}: {exc}") from exc
+        if list(arr.shape) != meta["shape"] or (verify and array_checksum(arr) != meta["sha"]):
+            raise CorruptEntry(key, f"array {name} does not match its checksum")
+        arrays[name] = arr
+    return arrays
+
 def _decode(tree: Any, arrays: dict[str, np.ndarray]) -> Any:
     if isinstance(tree, dict):
         if "__array__" in tree:
@@ -219,15 +245,72 @@ CACHE_MARKER = ".stages-cache"
 _CACHE_NAMES = ("manifest", "objects", "runs", "filehash.json", "fingerprints.json", "generated", "tmp", "sweeps",
                 CACHE_MARKER)
 KEY_PATTERN = re.compile(r"^[0-9a-f]{32}$")
+_URL = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*://")
+
+
+def is_url(location: str) -> bool:
+    """True for an object-store URL (``s3://bucket/prefix``), False for a local path."""
+    return bool(_URL.match(str(location)))
+
+
+def cache_location(location: str) -> str:
+    """The cache as the store takes it: a URL as given (without a trailing ``/``), a local path made absolute."""
+    return location.rstrip("/") if is_url(location) else os.path.abspath(location)
+
+
+def claim_folder(root: str) -> None:
+    """Create the local cache folder ``root`` with its marker, or adopt a folder that holds only what the engine
+    writes; leave a read-only folder as it is (see :meth:`Store.claim`).
+
+    Raises:
+        UserError: ``root`` is a file, or a folder with other content.
+    """
+    if os.path.isfile(os.path.join(root, CACHE_MARKER)):
+        return
+    if os.path.lexists(root) and not os.path.isdir(root):
+        raise UserError(f"the cache {root} is not a folder", fix="choose a folder for --cache / 'cache:'")
+    if os.path.isdir(root):
+        try:
+            foreign = sorted(n for n in os.listdir(root)  # hidden files (.DS_Store, .nfs*) do not count
+                             if not n.startswith(_CACHE_NAMES) and not n.startswith("."))
+        except OSError as exc:
+            raise UserError(f"cannot read the cache folder {root}: {exc.strerror}") from None
+        if foreign:
+            shown = ", ".join(foreign[:4]) + (" ..." if len(foreign) > 4 else "")
+            raise UserError(f"the cache folder {root} is not a stages cache (it holds {shown} and no "
+                            f"{CACHE_MARKER} marker): the engine does not write or clean there",
+                            fix="choose a new or empty folder for --cache / 'cache:' (e.g. ./cache)")
+    try:
+        os.makedirs(root, exist_ok=True)
+        atomic_write_text(os.path.join(root, CACHE_MARKER),
+                          json.dumps({"stages_cache": FORMAT_VERSION, "created": time.time()}))
+    except OSError:
+        pass  # read-only: reading works; writing commands say so (see writable)
 
 
 class Store:
     """Content-addressed entries under ``root`` (see module docstring)."""
 
+    def __new__(cls, root: str, warn: bool = True):
+        if cls is Store and is_url(root):  # an object-store URL: the entries live there
+            from .object_store import ObjectStore
+            return super().__new__(ObjectStore)
+        return super().__new__(cls)
+
     def __init__(self, root: str, warn: bool = True):
         """``warn``: print one warning per unreadable entry found (workers pass False: the client warns)."""
         self.root = os.path.abspath(root)
         self.warn = warn
+
+    @property
+    def location(self) -> str:
+        """Where the entries live, as the user names it (a folder, or a URL for an object store): what a worker
+        passes to ``Store(...)``. ``root`` is always a local folder (temporary files, engine tables)."""
+        return self.root
+
+    def exists(self) -> bool:
+        """True when the cache exists (so far only a planner looked at it otherwise)."""
+        return os.path.isdir(self.root)
 
     # paths -------------------------------------------------------------------------------------
     def manifest_path(self, key: str) -> str:
@@ -259,25 +342,7 @@ class Store:
         """
         if self.is_marked():
             return
-        if os.path.lexists(self.root) and not os.path.isdir(self.root):
-            raise UserError(f"the cache {self.root} is not a folder", fix="choose a folder for --cache / 'cache:'")
-        if os.path.isdir(self.root):
-            try:
-                foreign = sorted(n for n in os.listdir(self.root)  # hidden files (.DS_Store, .nfs*) do not count
-                                 if not n.startswith(_CACHE_NAMES) and not n.startswith("."))
-            except OSError as exc:
-                raise UserError(f"cannot read the cache folder {self.root}: {exc.strerror}") from None
-            if foreign:
-                shown = ", ".join(foreign[:4]) + (" ..." if len(foreign) > 4 else "")
-                raise UserError(f"the cache folder {self.root} is not a stages cache (it holds {shown} and no "
-                                f"{CACHE_MARKER} marker): the engine does not write or clean there",
-                                fix="choose a new or empty folder for --cache / 'cache:' (e.g. ./cache)")
-        try:
-            os.makedirs(self.root, exist_ok=True)
-            atomic_write_text(os.path.join(self.root, CACHE_MARKER),
-                              json.dumps({"stages_cache": FORMAT_VERSION, "created": time.time()}))
-        except OSError:
-            pass  # read-only: reading works; writing commands say so (see writable)
+        claim_folder(self.root)
 
     def writable(self) -> bool:
         """True when entries can be written under ``root``."""
@@ -405,7 +470,7 @@ class Store:
         manifest = {"format": FORMAT_VERSION, "key": key, "created": time.time(), "tree": tree,
                     "arrays": checksums, "files": files, "info": info or {}}
         manifest = json.loads(json.dumps(manifest, default=_json_default))  # the form a reader sees
-        manifest["checksum"] = digest_json({k: manifest[k] for k in _MANIFEST_FIELDS})
+        manifest["checksum"] = manifest_checksum(manifest)
         _MANIFESTS.pop(self.manifest_path(key), None)
         atomic_write_text(self.manifest_path(key), json.dumps(manifest))
         return manifest
@@ -443,16 +508,8 @@ class Store:
         manifest = self.manifest(key)
         if manifest is None:
             raise CorruptEntry(key, "manifest missing or unreadable")
-        arrays = {}
-        for name, meta in manifest["arrays"].items():
-            try:
-                arr = np.asarray(zarr.open_array(store=zarr.storage.LocalStore(
-                    os.path.join(self.object_path(key), name + ".zarr"), read_only=True), mode="r")[...])
-            except Exception as exc:  # missing chunk files, bad metadata, decompression errors
-                raise CorruptEntry(key, f"array {name}: {type(exc).__name__}: {exc}") from exc
-            if list(arr.shape) != meta["shape"] or (verify and array_checksum(arr) != meta["sha"]):
-                raise CorruptEntry(key, f"array {name} does not match its checksum")
-            arrays[name] = arr
+        arrays = read_checked_arrays(key, manifest["arrays"], verify, lambda name: zarr.storage.LocalStore(
+            os.path.join(self.object_path(key), name + ".zarr"), read_only=True))
         value = _decode(manifest["tree"], arrays)
         _READ_CACHE.put(key, (value, signature), sum(a.nbytes for a in arrays.values()))
         return _copy_arrays(value)
@@ -487,6 +544,41 @@ class Store:
         shutil.rmtree(self.object_path(key), ignore_errors=True)
         shutil.rmtree(self.files_path(key), ignore_errors=True)
 
+    def manifest_exists(self, key: str) -> bool:
+        """True when a manifest file is there for ``key``, usable or not (``status`` says "corrupt" then)."""
+        return os.path.exists(self.manifest_path(key))
+
+    def entry_bytes(self, key: str) -> int:
+        """Bytes of the entry's arrays and files (what ``gc`` frees by removing it)."""
+        return sum(_disk_usage(p) for p in (self.object_path(key), self.files_path(key)))
+
+    def stale_writes(self) -> list[tuple[str, int]]:
+        """(what, bytes) of data no manifest refers to, for ``gc``: none here (entries are renamed into place);
+        an object store lists the writes of runs that lost a race or were killed."""
+        return []
+
+    def remove_stale(self, what: str) -> None:
+        """Remove one item of :meth:`stale_writes`."""
+        raise ValueError(f"{what}: a local cache has no stale writes")
+
+
+def _disk_usage(path: str) -> int:
+    """Bytes of all files under ``path`` (0 if it does not exist)."""
+    total = 0
+    for dirpath, _, files in os.walk(path):
+        for f in files:
+            try:
+                total += os.path.getsize(os.path.join(dirpath, f))
+            except OSError:
+                pass
+    return total
+
+
+def manifest_checksum(doc: dict) -> str:
+    """The checksum a manifest carries: over its fields (and ``location``, which only an object store writes)."""
+    fields = _MANIFEST_FIELDS + (("location",) if "location" in doc else ())
+    return digest_json({k: doc[k] for k in fields})
+
 
 def _manifest_problem(doc: Any, key: str) -> str | None:
     """Why a parsed manifest cannot be trusted (None when it can)."""
@@ -496,7 +588,7 @@ def _manifest_problem(doc: Any, key: str) -> str | None:
         return f"has format {doc['format']!r} (this engine writes {FORMAT_VERSION})"
     if doc["key"] != key:
         return "belongs to another entry"
-    if digest_json({k: doc[k] for k in _MANIFEST_FIELDS}) != doc["checksum"]:
+    if manifest_checksum(doc) != doc["checksum"]:
         return "does not match its checksum (edited or damaged)"
     if not (isinstance(doc["arrays"], dict) and isinstance(doc["files"], dict)
             and all(isinstance(m, dict) and {"sha", "size"} <= set(m) for m in doc["files"].values())):

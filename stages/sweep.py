@@ -7,7 +7,7 @@ import os
 import time
 
 from .errors import PipelineError
-from .execute import execute
+from .execute import execute_rounds
 from .plan import plan_pipeline
 from .record import pipeline_id
 from .results import metrics, scalar_metrics
@@ -62,9 +62,9 @@ def sweep(path: str, grids: list[str], overrides=(), workers: int = 2, scheduler
     missing = [t for pl in plans for t in pl.missing()]
     log(f"sweep: {len(points)} point(s), {len(missing)} task(s) to run")
     failures = []
-    if missing:
+    if missing or any(pl.waiting() for pl in plans):  # in rounds: stages waiting for candidates run once known
         with client_session(workers, scheduler, store.root, log) as get_client:
-            outcome = execute(missing, store, get_client(), quiet=quiet)
+            plans, outcome, _ = execute_rounds(plans, get_client, quiet=quiet)
         failures = [{"stage": r.stage, "item": r.label, "error": r.error} for r in outcome.failed()]
     rows = [{"point": dict(x.split("=", 1) for x in p), "metrics": metrics(pl)} for p, pl in zip(points, plans)]
     result = {"pipeline": os.path.abspath(path), "grid": grids, "overrides": list(overrides), "rows": rows,

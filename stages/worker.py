@@ -17,7 +17,8 @@ import numpy as np
 
 from . import registry
 from .errors import CorruptEntry
-from .inputs import DictInput, InputError, InputSpec, PairsInput, StackInput, ValueInput, partial_tile
+from .inputs import (DictInput, InputError, InputSpec, PairsInput, SparsePairsInput, StackInput, ValueInput,
+                     partial_pairs, partial_tile)
 from .store import Store
 
 
@@ -82,7 +83,7 @@ def load_inputs(store: Store, inputs: dict[str, InputSpec], upstream: tuple = ()
         elif isinstance(spec, StackInput):
             kept = [np.asarray(s.load(store)) for s in spec.parts if _usable(s, failed)]
             out[arg] = np.stack(kept) if kept else None
-        elif isinstance(spec, PairsInput):
+        elif isinstance(spec, (PairsInput, SparsePairsInput)):
             tiles = set(spec.deps())
             drop = frozenset(e[2] for u in results if u.key in tiles for e in u.left_out)
             out[arg] = spec.load(store, drop=drop)
@@ -199,11 +200,43 @@ def run_task(call: TaskCall, *upstream: TaskResult) -> TaskResult:
 def _call(fn: registry.StageFunction, call: TaskCall, inputs: dict[str, Any], kwargs: dict,
           failed: dict[str, TaskResult]) -> Any:
     """Call the function; a pair tile with left-out items is computed on the kept items and stored with their
-    positions (inputs.partial_tile), or not computed at all when A or B kept none."""
+    positions (inputs.partial_tile), or not computed at all when A or B kept none. A task of a candidate pair
+    stage (an input ``pairs``) likewise keeps the pairs of kept items (inputs.partial_pairs)."""
     if fn.fanout != "pair":
         return fn.func(**inputs, **kwargs)
     kept = {arg: [i for i, p in enumerate(call.inputs[arg].parts) if _usable(p, failed)] for arg in ("A", "B")}
-    if all(len(kept[a]) == len(call.inputs[a].parts) for a in ("A", "B")):
+    complete = all(len(kept[a]) == len(call.inputs[a].parts) for a in ("A", "B"))
+    if "pairs" in call.inputs:
+        return _call_on_pairs(fn, call, inputs, kwargs, kept if not complete else None)
+    if complete:
         return fn.func(**inputs, **kwargs)
     block = fn.func(**inputs, **kwargs) if kept["A"] and kept["B"] else None
     return partial_tile(block, kept["A"], kept["B"])
+
+
+def _call_on_pairs(fn: registry.StageFunction, call: TaskCall, inputs: dict[str, Any], kwargs: dict,
+                   kept: dict[str, list[int]] | None) -> Any:
+    """A candidate pair task: ``fn(A, B, pairs=(p, 2))`` -> (p, ...). kept: the positions of the usable items of
+    A and B when some failed upstream (None: all usable); the pairs of the others are left out."""
+    pairs = inputs.pop("pairs")
+    if kept is None:
+        return _checked_pair_values(fn, fn.func(**inputs, pairs=pairs, **kwargs), len(pairs))
+    position = {}
+    for arg in ("A", "B"):  # stack position -> position among the kept items (-1: left out)
+        position[arg] = np.full(len(call.inputs[arg].parts), -1, dtype=np.int64)
+        position[arg][kept[arg]] = np.arange(len(kept[arg]))
+    a, b = position["A"][pairs[:, 0]], position["B"][pairs[:, 1]]
+    rows = np.flatnonzero((a >= 0) & (b >= 0))
+    if not rows.size:
+        return partial_pairs(None, [])
+    local = np.stack([a[rows], b[rows]], axis=1)
+    return partial_pairs(_checked_pair_values(fn, fn.func(**inputs, pairs=local, **kwargs), len(local)), rows.tolist())
+
+
+def _checked_pair_values(fn: registry.StageFunction, values: Any, n_pairs: int) -> np.ndarray:
+    """The function's values for ``n_pairs`` pairs as an array (p, ...); ValueError naming it otherwise."""
+    values = np.asarray(values)
+    if values.ndim == 0 or len(values) != n_pairs:
+        raise ValueError(f"{fn.name} was called with pairs= ({n_pairs}, 2) and returned shape {values.shape}; "
+                         f"a pair function given pairs must return one value per pair, shape ({n_pairs}, ...)")
+    return values

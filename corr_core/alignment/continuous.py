@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["interpolate_costs", "continuous_argmin", "refine_labels", "steps_to_degrees"]
+__all__ = ["interpolate_costs", "continuous_argmin", "refine_labels", "refine_labels_graph", "steps_to_degrees"]
 
 
 def _spectrum(C: np.ndarray) -> np.ndarray:
@@ -98,6 +98,60 @@ def _pair_minima(C: np.ndarray, iu: np.ndarray, ju: np.ndarray, chunk: int) -> t
     return d, cmin
 
 
+def _pair_weights(x: np.ndarray, iu: np.ndarray, ju: np.ndarray, d: np.ndarray, cmin: np.ndarray, V: int,
+                  sigma: float, periods: np.ndarray | None, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """(w, residual) (P,) of pairs (iu, ju) with continuous argmins d and smallest samples cmin (see
+    ``refine_labels``): residual = d - (x_j - x_i) wrapped modulo the pair's period, w = exp(-cmin/sigma) for a
+    usable pair within ``tolerance`` steps, else 0."""
+    per = np.full(len(x), float(V)) if periods is None else np.asarray(periods, dtype=np.float64)
+    p = np.minimum(per[iu], per[ju])
+    usable = p > 0
+    residual = _wrap(d - (x[ju] - x[iu]), np.where(usable, p, V))    # continuous minus discrete, (P,)
+    w = np.exp(-cmin / sigma) * usable * (np.abs(residual) <= tolerance)
+    return w, residual
+
+
+def refine_labels_graph(N: int, rows: np.ndarray, cols: np.ndarray, costs: np.ndarray, labels: np.ndarray,
+                        sigma: float, periods: np.ndarray | None = None, tolerance: float = 1.0,
+                        chunk: int = 16384) -> np.ndarray:
+    """``refine_labels`` on a candidate graph: the pairs (rows[p], cols[p]) (P,), rows < cols, with costs
+    (P, V) instead of all pairs of a dense C. The weighted graph Laplacian is sparse and the system is solved
+    by conjugate gradients (Jacobi preconditioned, x0 = 0, relative tolerance 1e-10; deterministic): memory
+    O(N + P), no N x N matrix. Returns t: (N,) float steps."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+    from scipy.sparse.linalg import cg
+
+    costs = np.asarray(costs)
+    V = costs.shape[1]
+    x = np.asarray(labels, dtype=np.float64)
+    iu, ju = np.asarray(rows, np.int64), np.asarray(cols, np.int64)
+    d, cmin = np.empty(len(iu)), np.empty(len(iu))
+    for s in range(0, len(iu), chunk):
+        block = costs[s:s + chunk].astype(np.float64)
+        d[s:s + chunk] = continuous_argmin(block)
+        cmin[s:s + chunk] = block.min(axis=1)
+    w, residual = _pair_weights(x, iu, ju, d, cmin, V, sigma, periods, tolerance)
+    on = w > 0  # the graph of usable pairs (no explicit zeros: they would count as edges)
+    A = sp.coo_matrix((np.concatenate([-w[on], -w[on]]), (np.concatenate([iu[on], ju[on]]),
+                                                         np.concatenate([ju[on], iu[on]]))), shape=(N, N)).tocsr()
+    degree = -np.asarray(A.sum(axis=1)).ravel()
+    b = np.zeros(N)
+    np.add.at(b, ju, w * residual)
+    np.add.at(b, iu, -w * residual)
+    ridge = 1e-8 * max(degree.max(initial=0.0), 1e-300)
+    L = (A + sp.diags(degree + ridge)).tocsr()
+    M = sp.diags(1.0 / (degree + ridge))
+    delta, info = cg(L, b, x0=np.zeros(N), rtol=1e-10, atol=0.0, maxiter=20 * N + 100, M=M)
+    if info != 0:
+        raise RuntimeError(f"continuous refinement: conjugate gradients did not converge ({info} iterations)")
+    # the gauge (sum delta = 0 on each connected part) is only loosely held by the ridge under the
+    # preconditioner: set it exactly
+    _, part = connected_components(A, directed=False)
+    delta -= (np.bincount(part, weights=delta) / np.bincount(part))[part]
+    return x + delta
+
+
 def refine_labels(C: np.ndarray, labels: np.ndarray, sigma: float, periods: np.ndarray | None = None,
                   tolerance: float = 1.0, chunk: int = 16384) -> np.ndarray:
     """Continuous labels t: (N,) float steps, near the discrete ``labels`` (N,) int, from pair costs C (N, N, V).
@@ -113,13 +167,9 @@ def refine_labels(C: np.ndarray, labels: np.ndarray, sigma: float, periods: np.n
     C = np.asarray(C)
     N, _, V = C.shape
     x = np.asarray(labels, dtype=np.float64)
-    per = np.full(N, float(V)) if periods is None else np.asarray(periods, dtype=np.float64)
     iu, ju = np.triu_indices(N, 1)
     d, cmin = _pair_minima(C, iu, ju, chunk)
-    p = np.minimum(per[iu], per[ju])
-    usable = p > 0
-    residual = _wrap(d - (x[ju] - x[iu]), np.where(usable, p, V))    # continuous minus discrete, (P,)
-    w = np.exp(-cmin / sigma) * usable * (np.abs(residual) <= tolerance)
+    w, residual = _pair_weights(x, iu, ju, d, cmin, V, sigma, periods, tolerance)
     L = np.zeros((N, N))                                               # weighted graph Laplacian
     np.add.at(L, (iu, ju), -w)
     L += L.T

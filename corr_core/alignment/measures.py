@@ -3,6 +3,9 @@
 
 A *solution* is the dict of ``corr_core.alignment.solvers.solve_alignment``: names (N,), labels (N,) int,
 solver, sigma, seed, knn. Re-solves use the solution's graph (``knn``); energies use the complete graph.
+C is a dense (N, N, V) array or, for a candidate graph, a ``corr_core.alignment.graph_costs.GraphCosts``: then
+re-solves and energies are on that graph (there is no complete graph), the equivariance check shifts the
+graph's (P, V) costs (no copy of an N x N array exists) and the upper bound uses the graph's edges.
 """
 from __future__ import annotations
 
@@ -11,12 +14,18 @@ import numpy as np
 from corr_core import mrf
 from corr_core.alignment import azimuth
 from corr_core.alignment.circulant import CirculantPairwise
+from corr_core.alignment.graph_costs import GraphCosts
 from corr_core.alignment.pair_costs import shift_costs
 from corr_core.alignment.solvers import (SOLVERS, knn_neighbors, solve_labels, solve_labels_with_symmetry,
                                         uniform_unary)
 
-__all__ = ["agreement", "seed_stability", "equivariance", "solver_quality", "ground_truth_agreement",
+__all__ = ["agreement", "seed_stability", "equivariance", "upper_bound", "solver_quality", "ground_truth_agreement",
            "continuous_error", "mode_agreement", "evaluate_alignment"]
+
+
+def _size(C) -> tuple[int, int]:
+    """(N shapes, V views) of dense costs (N, N, V) or graph costs."""
+    return (C.n, C.n_views) if isinstance(C, GraphCosts) else (C.shape[0], C.shape[2])
 
 
 def agreement(a: np.ndarray, b: np.ndarray, V: int) -> dict:
@@ -41,7 +50,7 @@ def seed_stability(C: np.ndarray, solution: dict, seeds: list, op: CirculantPair
     """Agreement (exact up to one offset; modulo each shape's symmetry when some are symmetric) with the
     solution of the labelings from other unary seeds: {"min", "mean", "n_seeds"}. op: the solution graph's
     operator, if already built."""
-    labels, V = np.asarray(solution["labels"]), C.shape[2]
+    labels, V = np.asarray(solution["labels"]), _size(C)[1]
     orders, agree_fn = _orders_and_agreement(solution, V)
     others = [solve_labels_with_symmetry(C, solution["solver"], float(solution["sigma"]), int(s),
                                          int(solution.get("knn", 0)), orders, op)
@@ -54,29 +63,45 @@ def seed_stability(C: np.ndarray, solution: dict, seeds: list, op: CirculantPair
 def equivariance(C: np.ndarray, solution: dict, shift_seed: int) -> float:
     """Shift every shape's views by a known random offset, solve again: fraction whose label moved by it
     (modulo each shape's symmetry when some are symmetric; shifting views keeps every C_ii, so the orders)."""
-    N, _, V = C.shape
+    N, V = _size(C)
     shifts = np.random.default_rng(shift_seed).integers(0, V, N)
     orders, agree_fn = _orders_and_agreement(solution, V)
-    shifted = solve_labels_with_symmetry(shift_costs(C, shifts), solution["solver"], float(solution["sigma"]),
+    moved = C.shifted(shifts) if isinstance(C, GraphCosts) else shift_costs(C, shifts)
+    shifted = solve_labels_with_symmetry(moved, solution["solver"], float(solution["sigma"]),
                                          int(solution["seed"]), int(solution.get("knn", 0)), orders)
     return float(agree_fn(shifted, (np.asarray(solution["labels"]) + shifts) % V))
 
 
+def upper_bound(op: CirculantPairwise, unary: np.ndarray) -> float:
+    """``mrf.upper_bound`` of the operator; for a sparse (graph) operator the per-pair term is summed over its
+    edges (each undirected pair once) instead of an N x N matrix of block maxima."""
+    if not op.sparse:
+        return float(mrf.upper_bound(op, unary))
+    lam = mrf.leading_eigenvalue(op)
+    lam += 1e-9 * max(1.0, abs(lam))
+    pair_bound = 0.5 * float(op.K_edges.max(axis=1).astype(np.float64).sum())
+    return float(np.asarray(unary).max(axis=1).sum() + min(op.n_nodes * lam / 2.0, pair_bound))
+
+
 def solver_quality(C: np.ndarray, solution: dict, peer_labels: dict, restarts: int, seed: int,
-                   op: CirculantPairwise | None = None) -> dict:
-    """Energies on the complete graph with the solution's unary terms: the answer, ICM from random starts,
-    the best of ``restarts`` random restarts, each peer solver's labeling (peer_labels {solver: (N,) int}),
-    a random labeling, and an upper bound. op: the complete graph's operator, if already built."""
-    N, _, V = C.shape
+                   op: CirculantPairwise | None = None, icm_starts: int = 5) -> dict:
+    """Energies on the complete graph (a candidate graph: on that graph) with the solution's unary terms: the
+    answer, ICM from ``icm_starts`` random starts (mean; None for 0), the best of ``restarts`` random restarts
+    (None for 0), each peer solver's labeling (peer_labels {solver: (N,) int}), a random labeling, and an
+    upper bound. op: the complete graph's operator, if already built."""
+    N, V = _size(C)
     if op is None:
-        op = CirculantPairwise(C, float(solution["sigma"]))
+        op = C.operator(float(solution["sigma"])) if isinstance(C, GraphCosts) else \
+            CirculantPairwise(C, float(solution["sigma"]))
     unary = uniform_unary(N, V, int(solution["seed"]))
     rng = np.random.default_rng(seed)
     energy = lambda lab: float(mrf.energy(op, unary, lab))  # noqa: E731
-    icm = [energy(mrf.icm(op, unary, mrf.random_labels(N, V, rng))) for _ in range(5)]
-    quality = {"energy": energy(np.asarray(solution["labels"])), "icm_random_start_mean": float(np.mean(icm)),
-               "best_of_random_restarts": float(mrf.best_of_random_restarts(op, unary, restarts, seed=seed)[1]),
-               "upper_bound": float(mrf.upper_bound(op, unary)),
+    icm = [energy(mrf.icm(op, unary, mrf.random_labels(N, V, rng))) for _ in range(icm_starts)]
+    quality = {"energy": energy(np.asarray(solution["labels"])),
+               "icm_random_start_mean": float(np.mean(icm)) if icm else None,
+               "best_of_random_restarts": float(mrf.best_of_random_restarts(op, unary, restarts, seed=seed)[1])
+               if restarts else None,
+               "upper_bound": upper_bound(op, unary),
                "random_labeling": energy(mrf.random_labels(N, V, rng))}
     quality.update({f"energy_{peer}": energy(lab) for peer, lab in peer_labels.items()})
     return quality
@@ -182,7 +207,8 @@ def _continuous_fields(names: list[str], solution: dict) -> dict:
 def evaluate_alignment(C: np.ndarray, solution: dict, truth: dict[str, int] | None = None,
                        other: dict | None = None, seeds: list = (0, 1, 2, 3, 4), shift_seed: int = 123,
                        restarts: int = 20, compare_solvers: bool = True,
-                       truth_deg: dict[str, float] | None = None, truth_orders: dict[str, int] | None = None) -> dict:
+                       truth_deg: dict[str, float] | None = None, truth_orders: dict[str, int] | None = None,
+                       icm_starts: int = 5) -> dict:
     """All measures of an alignment solution of pair costs C: (N, N, V) (float32 as stored; the operators
     compute in float64).
 
@@ -197,16 +223,25 @@ def evaluate_alignment(C: np.ndarray, solution: dict, truth: dict[str, int] | No
       modulo each shape's symmetry (truth_orders {name: k} if given, else the detected orders); with truth_deg
       {name: degrees} the continuous mean_error_deg / max_error_deg; symmetry_detected: fraction of shapes
       whose detected order equals truth_orders;
-    - mode_agreement with another run's solution on common shapes.
+    - mode_agreement with another run's solution on common shapes;
+    - on a candidate graph (C a GraphCosts): graph "candidates", pairs_computed (P), pairs_total (N(N-1)/2)
+      and pairs_fraction.
     """
-    C = np.asarray(C)
     names, labels = list(solution["names"]), np.asarray(solution["labels"])
-    N, _, V = C.shape
     sigma = float(solution["sigma"])
-    neighbors = knn_neighbors(C, int(solution.get("knn", 0)))
-    graph_op = CirculantPairwise(C, sigma, neighbors)                                 # the solution's graph
-    full_op = graph_op if neighbors is None else CirculantPairwise(C, sigma)          # energies, peers
-    m: dict = {"n_shapes": N, "n_views": V, "solver": solution["solver"], "sigma": sigma,
+    if isinstance(C, GraphCosts):
+        N, V = C.n, C.n_views
+        graph_op = full_op = C.operator(sigma)                                        # the candidate graph
+        pairs = {"graph": "candidates", "pairs_computed": C.n_pairs, "pairs_total": N * (N - 1) // 2,
+                 "pairs_fraction": C.n_pairs / max(1, N * (N - 1) // 2)}
+    else:
+        C = np.asarray(C)
+        N, _, V = C.shape
+        neighbors = knn_neighbors(C, int(solution.get("knn", 0)))
+        graph_op = CirculantPairwise(C, sigma, neighbors)                             # the solution's graph
+        full_op = graph_op if neighbors is None else CirculantPairwise(C, sigma)      # energies, peers
+        pairs = {}
+    m: dict = {"n_shapes": N, "n_views": V, "solver": solution["solver"], "sigma": sigma, **pairs,
                "labels": {n: int(l) for n, l in zip(names, labels)},
                "angle_deg": {n: float(l * 360.0 / V) for n, l in zip(names, labels)},
                **_continuous_fields(names, solution),
@@ -218,7 +253,7 @@ def evaluate_alignment(C: np.ndarray, solution: dict, truth: dict[str, int] | No
                  solve_labels(C, p, sigma, int(solution["seed"]), op=full_op)["labels"] for p in SOLVERS}
         m["agreement_with"] = {p: float(azimuth.agreement_up_to_offset(lab, labels, V)[0])
                                for p, lab in peers.items() if p != solution["solver"]}
-    m["solver_quality"] = solver_quality(C, solution, peers, restarts, shift_seed, full_op)
+    m["solver_quality"] = solver_quality(C, solution, peers, restarts, shift_seed, full_op, icm_starts)
     if truth:
         detected = solution.get("symmetry_order")
         orders = (np.array([truth_orders.get(n, 1) for n in names]) if truth_orders else

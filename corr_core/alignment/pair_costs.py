@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["pair_costs", "pair_costs_naive", "pair_costs_flops", "mirror_pair_costs", "shift_costs", "auto_sigma",
+__all__ = ["pair_costs", "pair_costs_listed", "pair_costs_naive", "pair_costs_flops", "mirror_pair_costs", "shift_costs", "auto_sigma",
            "nearest_shapes"]
 
 
@@ -75,6 +75,42 @@ def pair_costs(FA: np.ndarray, FB: np.ndarray | None = None) -> np.ndarray:
     return np.maximum(C, 0.0, out=C)
 
 
+# above this fraction of listed pairs in an (a, b) block, ``pair_costs_listed`` computes the whole block with
+# GEMMs and picks the listed pairs (cheaper than gathering the pairs one by one)
+DENSE_BLOCK_FRACTION = 0.25
+
+
+def pair_costs_listed(FA: np.ndarray, FB: np.ndarray, pairs: np.ndarray, chunk: int = 128) -> np.ndarray:
+    """C: (p, V) float32, C[k, theta] = sum_v ||FA[i, v] - FB[j, (v+theta)%V]||^2 for the listed pairs
+    (i, j) = pairs[k] (p, 2) int (row of FA, row of FB): the values of ``pair_costs(FA, FB)[i, j]`` without the
+    other a*b - p pairs (same Fourier-domain formula, per pair: 8 (V//2+1) D flops each, gathered ``chunk``
+    pairs at a time; a block with more than DENSE_BLOCK_FRACTION of its pairs listed is computed whole)."""
+    FA, FB = _check_features(FA, "FA"), _check_features(FB, "FB")
+    if FA.shape[1:] != FB.shape[1:]:
+        raise ValueError(f"FA {FA.shape} and FB {FB.shape} must share (V, D)")
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if len(pairs) and (pairs.min() < 0 or pairs[:, 0].max() >= len(FA) or pairs[:, 1].max() >= len(FB)):
+        raise ValueError(f"pairs index rows outside FA ({len(FA)}) or FB ({len(FB)})")
+    if len(pairs) > DENSE_BLOCK_FRACTION * len(FA) * len(FB):
+        return np.ascontiguousarray(pair_costs(FA, FB)[pairs[:, 0], pairs[:, 1]])
+    V = FA.shape[1]
+    FA = FA.astype(np.float32, copy=False)
+    FB = FB.astype(np.float32, copy=False)
+    A_re, A_im = _real_dft_blocks(FA)
+    B_re, B_im = _real_dft_blocks(FB)
+    P = np.empty((A_re.shape[0], len(pairs)), dtype=np.complex64)
+    for s in range(0, len(pairs), chunk):
+        i, j = pairs[s:s + chunk, 0], pairs[s:s + chunk, 1]
+        Ar, Ai, Br, Bi = A_re[:, i], A_im[:, i], B_re[:, j], B_im[:, j]      # (K, c, D) each
+        P[:, s:s + chunk].real = np.einsum("kcd,kcd->kc", Ar, Br) + np.einsum("kcd,kcd->kc", Ai, Bi)
+        P[:, s:s + chunk].imag = np.einsum("kcd,kcd->kc", Ar, Bi) - np.einsum("kcd,kcd->kc", Ai, Br)
+    cross = np.fft.irfft(P, n=V, axis=0).astype(np.float32)               # (V, p)
+    sq_a = np.einsum("ivd,ivd->i", FA, FA, dtype=np.float64).astype(np.float32)
+    sq_b = np.einsum("jvd,jvd->j", FB, FB, dtype=np.float64).astype(np.float32)
+    C = sq_a[pairs[:, 0], None] + sq_b[pairs[:, 1], None] - 2.0 * cross.T
+    return np.maximum(C, 0.0, out=C)
+
+
 def _real_dft(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Real and imaginary parts of the rFFT of F: (n, V, D) along the view axis, each (V//2+1, n, D) float32,
     computed as one small real matmul with the DFT matrix (contiguous output, no strided FFT)."""
@@ -84,6 +120,18 @@ def _real_dft(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     T = np.concatenate([np.cos(angles), -np.sin(angles)]).astype(np.float32)  # (2K, V)
     out = (T @ F.transpose(1, 0, 2).reshape(V, n * D)).reshape(2 * K, n, D)
     return out[:K], out[K:]
+
+
+def _real_dft_blocks(F: np.ndarray, rows: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    """``_real_dft`` computed ``rows`` shapes at a time into the two (V//2+1, n, D) float32 outputs, so that no
+    transposed copy of the whole stack F: (n, V, D) is made (a pair task's stacks are hundreds of MB)."""
+    n, V, D = F.shape
+    K = V // 2 + 1
+    re = np.empty((K, n, D), np.float32)
+    im = np.empty((K, n, D), np.float32)
+    for s in range(0, n, rows):
+        re[:, s:s + rows], im[:, s:s + rows] = _real_dft(F[s:s + rows])
+    return re, im
 
 
 def pair_costs_flops(a: int, b: int, V: int, D: int) -> float:

@@ -21,7 +21,7 @@ import numpy as np
 from corr_core.alignment.continuous import interpolate_costs
 from corr_core.alignment.pair_costs import auto_sigma
 
-__all__ = ["symmetry_orders", "symmetry_periods", "downweight_symmetric_pairs", "place_symmetric", "harmonic_sync",
+__all__ = ["symmetry_orders", "orders_from_self_costs", "symmetry_periods", "downweight_symmetric_pairs", "place_symmetric", "harmonic_sync",
            "place_against"]
 
 
@@ -35,12 +35,27 @@ def symmetry_orders(C: np.ndarray, scale: float | None = None, tolerance: float 
     (m = 1..k-1) all count; 0 when every phi on a grid of ``samples_per_step`` per step counts; else 1.
     """
     C = np.asarray(C)
-    N, _, V = C.shape
+    N = C.shape[0]
     scale = auto_sigma(C) if scale is None else float(scale)
-    diag = C[np.arange(N), np.arange(N)].astype(np.float64)          # (N, V)
-    threshold = tolerance * scale
-    if threshold <= 0:  # every pair of shapes is identical: nothing tells rotations apart
+    return orders_from_self_costs(C[np.arange(N), np.arange(N)], scale, tolerance, samples_per_step)
+
+
+def orders_from_self_costs(self_costs: np.ndarray, scale: float, tolerance: float = 0.05,
+                           samples_per_step: int = 4, chunk: int = 2048) -> np.ndarray:
+    """(N,) int symmetry orders from each shape's self costs C_ii: (N, V) and the collection's cost ``scale``
+    (see ``symmetry_orders``, which reads both off a dense C; a candidate graph gives them directly). Rows are
+    independent: computed in chunks of ``chunk`` shapes (bounded temporaries at large N)."""
+    diag = np.asarray(self_costs)
+    N = diag.shape[0]
+    if tolerance * float(scale) <= 0:  # every pair of shapes is identical: nothing tells rotations apart
         return np.zeros(N, np.int64)
+    return np.concatenate([_orders_of_rows(diag[s:s + chunk].astype(np.float64), tolerance * float(scale),
+                                           samples_per_step) for s in range(0, N, chunk)] or [np.zeros(0, np.int64)])
+
+
+def _orders_of_rows(diag: np.ndarray, threshold: float, samples_per_step: int) -> np.ndarray:
+    """Symmetry orders (n,) int of self costs diag: (n, V) float64 at an absolute ``threshold``."""
+    N, V = diag.shape
     fine = interpolate_costs(diag, np.broadcast_to(np.arange(V * samples_per_step) / samples_per_step,
                                                     (N, V * samples_per_step)))
     orders = np.where(np.all(fine <= threshold, axis=1), 0, 1)
@@ -118,4 +133,62 @@ def place_symmetric(C: np.ndarray, orders: np.ndarray, solve, sigma: float) -> n
     everyone = np.arange(len(orders))
     for i in np.flatnonzero(orders != ks[0]):  # second pass: against every other shape, now all placed
         labels[i] = place_against(C, i, everyone[everyone != i], labels)
+    return labels
+
+
+def place_against_graph(gc, i: int, placed: np.ndarray, labels: np.ndarray) -> int:
+    """``place_against`` on a candidate graph (``graph_costs.GraphCosts`` gc): argmin_theta of
+    sum_j C_ij((labels_j - theta) % V) over the graph neighbours j of shape i that are in the boolean mask
+    ``placed`` (N,); the current label when none is."""
+    V = gc.n_views
+    nbrs, costs = gc.neighbor_costs(i)
+    use = placed[nbrs]
+    if not use.any():
+        return int(labels[i])
+    theta = np.arange(V)
+    idx = (labels[nbrs[use]][:, None] - theta[None, :]) % V
+    total = np.take_along_axis(costs[use].astype(np.float64), idx, axis=1).sum(axis=0)
+    return int(np.argmin(total))
+
+
+def _harmonic_sync_graph(gc, k: int, sigma: float) -> np.ndarray:
+    """``harmonic_sync`` on a candidate graph: labels (n,) int of n shapes of order k from the top eigenvector
+    of the sparse k-th harmonic matrix (Lanczos above ``sync.DENSE_EIGH_MAX`` shapes)."""
+    from corr_core.alignment.sync import top_eigenvector
+    if gc.n == 1:
+        return np.zeros(1, np.int64)
+    V = gc.n_views
+    z = top_eigenvector(gc.harmonic(sigma, k))
+    z = z * np.exp(-1j * np.angle(z[0]))
+    return np.rint(-np.angle(z) * V / (2 * np.pi * k)).astype(np.int64) % V
+
+
+def place_symmetric_graph(gc, orders: np.ndarray, solve, sigma: float) -> np.ndarray:
+    """``place_symmetric`` on a candidate graph (``graph_costs.GraphCosts`` gc): the same steps with the pairs
+    of the graph only (down-weighting per pair, placement against the placed graph neighbours, the k-th
+    harmonic of the lowest order's subgraph when no shape is asymmetric). solve(graph costs) -> labels (N,)."""
+    orders = np.asarray(orders)
+    V = gc.n_views
+    ks = sorted({int(k) for k in orders}, key=lambda k: (k == 0, k))
+    kk = np.where(orders == 0, V, orders).astype(np.float64)
+    minima = np.maximum(kk[gc.rows], kk[gc.cols])
+    if ks[0] == 1:
+        down = (gc.costs.astype(np.float64) + (sigma * np.log(minima))[:, None]).astype(np.float32)
+        labels = np.asarray(solve(gc.with_costs(down)), np.int64).copy()
+    else:
+        labels = np.zeros(len(orders), np.int64)
+        if ks[0] >= 2:
+            first = np.flatnonzero(orders == ks[0])
+            labels[first] = _harmonic_sync_graph(gc.subgraph(first), ks[0], sigma)
+    placed = orders == ks[0]
+    for k in ks[1:]:
+        group = np.flatnonzero(orders == k)
+        for i in group:
+            labels[i] = place_against_graph(gc, i, placed, labels)
+        placed[group] = True
+    everyone = np.ones(len(orders), bool)
+    for i in np.flatnonzero(orders != ks[0]):  # second pass: against every other shape, now all placed
+        everyone[i] = False
+        labels[i] = place_against_graph(gc, i, everyone, labels)
+        everyone[i] = True
     return labels

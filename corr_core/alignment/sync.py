@@ -20,7 +20,8 @@ import numpy as np
 from corr_core.alignment.circulant import CirculantPairwise, symmetrize_costs
 from corr_core.alignment.pair_costs import auto_sigma
 
-__all__ = ["sync_matrix", "spectral_sync", "spectral_sync_operator", "round_phases", "projected_power"]
+__all__ = ["sync_matrix", "spectral_sync", "spectral_sync_operator", "round_phases", "projected_power",
+           "projected_power_operator", "top_eigenvector"]
 
 
 def sync_matrix(C: np.ndarray, sigma: float | None = None, neighbors: np.ndarray | None = None,
@@ -38,7 +39,7 @@ def sync_matrix(C: np.ndarray, sigma: float | None = None, neighbors: np.ndarray
 DENSE_EIGH_MAX = 500
 
 
-def _top_eigenvector(H) -> np.ndarray:
+def top_eigenvector(H) -> np.ndarray:
     """Eigenvector of the largest eigenvalue of a Hermitian (N, N) matrix (ndarray or scipy.sparse)."""
     N = H.shape[0]
     if N <= DENSE_EIGH_MAX:
@@ -64,7 +65,7 @@ def spectral_sync_operator(op: CirculantPairwise, normalize: bool = True) -> np.
         else:
             H *= s[:, None]
             H *= s[None, :]
-    return round_phases(_top_eigenvector(H), op.n_labels)
+    return round_phases(top_eigenvector(H), op.n_labels)
 
 
 def spectral_sync(C: np.ndarray, sigma: float | None = None, neighbors: np.ndarray | None = None,
@@ -99,8 +100,15 @@ def projected_power(C: np.ndarray, sigma: float | None = None, labels0: np.ndarr
     if score not in ("kernel", "log"):
         raise ValueError(f"score must be 'kernel' or 'log', got {score!r}")
     op = _centered_score_operator(C, sigma, score, neighbors)
+    labels = spectral_sync(C, sigma, neighbors) if labels0 is None else np.asarray(labels0, np.int64) % op.n_labels
+    return projected_power_operator(op, labels, max_iter)
+
+
+def projected_power_operator(op: CirculantPairwise, labels0: np.ndarray, max_iter: int = 100) -> tuple[np.ndarray, int]:
+    """The hard projected power iteration z <- onehot(argmax_a (S z)_a) from labels0 (N,) int on a built score
+    operator S (``CirculantPairwise``, dense or sparse; e.g. centred kernels): (labels (N,) int, iterations)."""
     N, V = op.n_nodes, op.n_labels
-    labels = spectral_sync(C, sigma, neighbors) if labels0 is None else np.asarray(labels0, np.int64) % V
+    labels = np.asarray(labels0, np.int64) % V
     it = 0
     for it in range(1, max_iter + 1):
         Z = np.zeros((N, V))

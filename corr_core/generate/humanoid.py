@@ -296,12 +296,14 @@ def _local_rotations(pose: dict[str, float], J: dict[str, np.ndarray]) -> dict[s
     return R
 
 
-def pose_mesh(V: np.ndarray, W: np.ndarray, pose: dict[str, float]) -> np.ndarray:
+def pose_mesh(V: np.ndarray, W: np.ndarray, pose: dict[str, float],
+              J: dict[str, np.ndarray] | None = None) -> np.ndarray:
     """Linear blend skinning of rest vertices V: (n,3) with weights W: (n,B) -> posed vertices (n,3).
 
+    J: the rest skeleton of V (default ``skeleton()``; a body from ``shape_body`` passes its own).
     Forward kinematics: the global transform of a bone is its parent's composed with a rotation about its pivot.
     """
-    J = skeleton()
+    J = skeleton() if J is None else J
     bones = _bones(J)
     local = _local_rotations(pose, J)
     glob: dict[str, tuple[np.ndarray, np.ndarray]] = {}
@@ -317,6 +319,94 @@ def pose_mesh(V: np.ndarray, W: np.ndarray, pose: dict[str, float]) -> np.ndarra
     ts = np.stack([glob[b[0]][1] for b in bones])          # (B,3)
     per_bone = np.einsum("bij,nj->nbi", Rs, V) + ts[None]  # (n,B,3)
     return np.einsum("nb,nbi->ni", W, per_bone)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# bodies: different people (limb lengths, girth, proportions) with the same vertices and faces
+
+BODY_RANGES = {  # name -> (low, high) of a uniform draw; 1.0 = the rest body
+    "height": (0.90, 1.10), "torso_length": (0.88, 1.15), "torso_girth": (0.85, 1.35),
+    "shoulder_width": (0.88, 1.15), "hip_width": (0.88, 1.20), "arm_length": (0.85, 1.15),
+    "arm_girth": (0.80, 1.35), "leg_length": (0.85, 1.15), "leg_girth": (0.80, 1.35), "head_size": (0.90, 1.10)}
+
+
+def neutral_body() -> dict[str, float]:
+    """The rest body's proportions (every factor 1.0): ``shape_body`` leaves the mesh unchanged."""
+    return {name: 1.0 for name in BODY_RANGES}
+
+
+def random_body(rng: np.random.Generator) -> dict[str, float]:
+    """Random body proportions (dimensionless factors, ``BODY_RANGES``), drawn in the order of BODY_RANGES."""
+    return {name: float(rng.uniform(lo, hi)) for name, (lo, hi) in BODY_RANGES.items()}
+
+
+def _limb_scale(axis: np.ndarray, length: float, girth: float) -> np.ndarray:
+    """(3,3) scaling by ``length`` along unit ``axis`` and ``girth`` across it."""
+    u = _unit(axis)
+    return girth * np.eye(3) + (length - girth) * np.outer(u, u)
+
+
+def _body_scales(body: dict[str, float], J: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Per-bone (3,3) linear part of the rest-body change, about the bone's pivot (bone names of ``_bones``)."""
+    b = body
+    M = {"pelvis": np.diag([b["hip_width"], 1.0, b["torso_girth"]]),
+         "abdomen": np.diag([b["torso_girth"], b["torso_length"], b["torso_girth"]]),
+         "chest": np.diag([b["shoulder_width"], b["torso_length"], b["torso_girth"]]),
+         "neck": np.eye(3), "head": b["head_size"] * np.eye(3)}
+    for s in "LR":
+        j = lambda name: J[f"{s}_{name}"]  # noqa: E731
+        M[f"{s}_upperarm"] = _limb_scale(j("elbow") - j("shoulder"), b["arm_length"], b["arm_girth"])
+        M[f"{s}_forearm"] = _limb_scale(j("wrist") - j("elbow"), b["arm_length"], b["arm_girth"])
+        M[f"{s}_hand"] = _limb_scale(j("fingertip") - j("wrist"), b["arm_length"], b["arm_girth"])
+        M[f"{s}_thigh"] = _limb_scale(j("knee") - j("hip"), b["leg_length"], b["leg_girth"])
+        M[f"{s}_shin"] = _limb_scale(j("ankle") - j("knee"), b["leg_length"], b["leg_girth"])
+        M[f"{s}_foot"] = np.eye(3)
+    return M
+
+
+def _joint_bone(J: dict[str, np.ndarray]) -> dict[str, str]:
+    """Joint name -> the bone whose transform moves it (the parent bone of the bone it pivots, or its own
+    bone for an end joint)."""
+    owner = {"pelvis": "pelvis", "waist": "pelvis", "chest": "abdomen", "neck": "chest", "head": "head"}
+    for s in "LR":
+        owner |= {f"{s}_shoulder": "chest", f"{s}_elbow": f"{s}_upperarm", f"{s}_wrist": f"{s}_forearm",
+                  f"{s}_fingertip": f"{s}_hand", f"{s}_hip": "pelvis", f"{s}_knee": f"{s}_thigh",
+                  f"{s}_ankle": f"{s}_shin", f"{s}_toe": f"{s}_foot"}
+    missing = set(J) - set(owner)
+    if missing:
+        raise ValueError(f"joints {sorted(missing)} have no owning bone")
+    return owner
+
+
+def shape_body(V: np.ndarray, W: np.ndarray, body: dict[str, float]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """A different person from the rest mesh: same vertices (ids) and faces, other proportions.
+
+    Each bone b gets the affine map x -> p_b' + M_b (x - p_b) (``_body_scales``: length along limbs, girth
+    across them, torso and shoulder/hip widths, head size), where the new pivot p_b' is the parent's map applied
+    to the rest pivot (forward kinematics, so joints stay attached); the maps are blended with the skinning
+    weights W: (n,B), then the body stands on the rest body's floor and is scaled by ``height`` about the origin.
+    Args: V: (n,3) rest vertices (metres); body: factors, keys of ``BODY_RANGES`` (missing ones are 1.0).
+    Returns: V_body (n,3), J_body: its rest skeleton (for ``pose_mesh``).
+    """
+    unknown = set(body) - set(BODY_RANGES)
+    if unknown:
+        raise ValueError(f"unknown body factors {sorted(unknown)}; known: {sorted(BODY_RANGES)}")
+    full = neutral_body() | {k: float(v) for k, v in body.items()}
+    J = skeleton()
+    bones = _bones(J)
+    M = _body_scales(full, J)
+    maps: dict[str, tuple[np.ndarray, np.ndarray]] = {}      # bone -> (M, t): x -> M x + t
+    for name, parent, pivot, _, _ in bones:                   # parents precede children
+        new_pivot = pivot if parent is None else maps[parent][0] @ pivot + maps[parent][1]
+        maps[name] = (M[name], new_pivot - M[name] @ pivot)
+    Ms = np.stack([maps[b[0]][0] for b in bones])
+    ts = np.stack([maps[b[0]][1] for b in bones])
+    Vb = np.einsum("nb,nbi->ni", W, np.einsum("bij,nj->nbi", Ms, V) + ts[None])
+    owner = _joint_bone(J)
+    Jb = {k: maps[owner[k]][0] @ p + maps[owner[k]][1] for k, p in J.items()}
+    lift = np.array([0.0, V[:, 1].min() - Vb[:, 1].min(), 0.0])
+    scale = full["height"]
+    return scale * (Vb + lift), {k: scale * (p + lift) for k, p in Jb.items()}
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -356,36 +446,105 @@ def landmark_vertices(V: np.ndarray) -> dict[str, int]:
     return {name: int(np.argmin(np.linalg.norm(V - p, axis=1))) for name, p in landmark_targets().items()}
 
 
-# ---------------------------------------------------------------------------------------------------------------
-# dataset
-
-
-def make_humanoid_dataset(n_poses: int = 6, seed: int = 0):
+def make_humanoid_dataset(n_poses: int = 6, seed: int = 0, vary_bodies: bool = False):
     """Rest mesh, posed meshes and landmarks, in memory.
 
+    vary_bodies: each posed mesh is also a different person (``random_body`` from
+    ``np.random.default_rng([seed, 1])``, so the poses are those of ``vary_bodies=False``); the rest mesh stays
+    the rest body. Same vertices and faces either way.
     Returns: (V_rest (n,3), F (m,3), poses list of (n,3) arrays, pose parameters list of dicts,
-    landmarks dict name -> vertex id).
+    landmarks dict name -> vertex id, bodies list of dicts (all 1.0 without ``vary_bodies``)).
     """
     V, F = make_humanoid_rest()
     W, _ = skinning_weights(V, F)
     rng = np.random.default_rng(seed)
     params = [random_pose(rng) for _ in range(n_poses)]
-    posed = [pose_mesh(V, W, p) for p in params]
-    return V, F, posed, params, landmark_vertices(V)
+    body_rng = np.random.default_rng([seed, 1])
+    bodies = [random_body(body_rng) if vary_bodies else neutral_body() for _ in range(n_poses)]
+    posed = []
+    for pose, body in zip(params, bodies):
+        Vb, Jb = shape_body(V, W, body) if vary_bodies else (V, None)
+        posed.append(pose_mesh(Vb, W, pose, Jb))
+    return V, F, posed, params, landmark_vertices(V), bodies
 
 
-def write_humanoid_dataset(out_dir: str | os.PathLike, n_poses: int = 6, seed: int = 0) -> dict:
+# ---------------------------------------------------------------------------------------------------------------
+# other connectivity (a target whose true map is known by construction)
+
+REMESH_KINDS = ("subdivided", "decimated")
+
+
+def subdivide_midpoint(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """1-to-4 midpoint subdivision: V (n,3), F (m,3) -> V' (n + E,3) (the n vertices first, same ids, then
+    one per edge), F' (4m,3), same orientation."""
+    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    edges, inverse = np.unique(E, axis=0, return_inverse=True)
+    mid = len(V) + inverse.reshape(3, len(F)).T                 # (m,3): midpoint of edge (0,1), (1,2), (2,0)
+    a, b, c = F.T
+    ab, bc, ca = mid.T
+    F2 = np.concatenate([np.stack(t, 1) for t in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
+    return np.concatenate([V, V[edges].mean(axis=1)]), F2.astype(np.int64)
+
+
+def _decimate(V: np.ndarray, F: np.ndarray, fraction: float) -> tuple[np.ndarray, np.ndarray]:
+    """Quadric edge-collapse decimation (open3d) to ``fraction`` of the faces; unused vertices removed."""
+    from corr_core._open3d import load_open3d
+
+    o3d = load_open3d()
+    m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32)))
+    m = m.simplify_quadric_decimation(int(len(F) * fraction))
+    m.remove_unreferenced_vertices()
+    return np.asarray(m.vertices, np.float64), np.asarray(m.triangles, np.int64)
+
+
+def remesh(V: np.ndarray, F: np.ndarray, kind: str, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The same surface with another triangulation and vertex order, and the true map onto it.
+
+    kind "subdivided": midpoint subdivision (exact: vertex i stays a vertex); "decimated": quadric decimation to
+    half the faces (truth: the nearest kept vertex to each original one, i.e. exact to within an edge). The new
+    vertex ids are shuffled (``np.random.default_rng(seed)``) so that no method can rely on vertex order.
+    Args: V (n,3), F (m,3). Returns V2 (n2,3), F2 (m2,3), truth (n,) int: vertex of V2 that vertex i becomes.
+    """
+    from scipy.spatial import cKDTree
+
+    if kind == "subdivided":
+        V2, F2 = subdivide_midpoint(V, F)
+        truth = np.arange(len(V))
+    elif kind == "decimated":
+        V2, F2 = _decimate(V, F, 0.5)
+        truth = cKDTree(V2).query(V)[1]
+    else:
+        raise ValueError(f"remesh kind must be one of {REMESH_KINDS}, got {kind!r}")
+    order = np.random.default_rng(seed).permutation(len(V2))   # new id of old vertex j: rank[j]
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(V2))
+    return V2[order], rank[F2], rank[truth].astype(np.int64)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# dataset
+
+
+def write_humanoid_dataset(out_dir: str | os.PathLike, n_poses: int = 6, seed: int = 0, vary_bodies: bool = False,
+                           remeshed: tuple[str, ...] | list[str] = ()) -> dict:
     """Write the course layout: ``meshes/template/mesh000.obj`` (rest pose), ``meshes/test/meshNNN.obj``
     (NNN = 001..n_poses, random poses drawn from ``np.random.default_rng(seed)``), ``landmark_vids.txt`` and
     ``sparse_landmark_vids.txt`` (``vid,Name`` lines, 0-based). All meshes share faces; vertex i matches vertex i.
 
+    vary_bodies: the test meshes are other people too (``make_humanoid_dataset``); same faces.
+    remeshed: kinds (``REMESH_KINDS``); the k-th is written as ``meshes/test/mesh<n_poses+k>.obj``, pose k
+    (1-based) re-triangulated by ``remesh`` (seed k), with its true map ``ground_truth/<mesh>.txt`` (one target
+    vertex id per template vertex, a line each) and its landmarks ``landmarks/<mesh>.txt`` (``vid,Name``).
     Returns (JSON-serialisable): {"out_dir", "template", "tests": [paths], "landmarks": {name: vid},
-    "sparse_landmarks": {name: vid}, "n_vertices", "n_faces", "poses": [dict of joint angles in degrees]}.
+    "sparse_landmarks": {name: vid}, "n_vertices", "n_faces", "poses": [dict of joint angles in degrees],
+    "bodies": [dict of body factors], "remeshed": {mesh: {"kind", "n_vertices"}}}.
     """
     out = Path(out_dir)
     (out / "meshes" / "template").mkdir(parents=True, exist_ok=True)
     (out / "meshes" / "test").mkdir(parents=True, exist_ok=True)
-    V, F, posed, params, lms = make_humanoid_dataset(n_poses, seed)
+    V, F, posed, params, lms, bodies = make_humanoid_dataset(n_poses, seed, vary_bodies=vary_bodies)
+    if len(remeshed) > n_poses:
+        raise ValueError(f"remeshed: {len(remeshed)} kinds but only {n_poses} poses to remesh")
     template = out / "meshes" / "template" / "mesh000.obj"
     save_obj(template, V, F)
     tests = []
@@ -393,9 +552,21 @@ def write_humanoid_dataset(out_dir: str | os.PathLike, n_poses: int = 6, seed: i
         path = out / "meshes" / "test" / f"mesh{i:03d}.obj"
         save_obj(path, Vp, F)
         tests.append(str(path))
+    remeshed_info = {}
+    for k, kind in enumerate(remeshed, start=1):
+        name = f"mesh{n_poses + k:03d}"
+        V2, F2, truth = remesh(posed[k - 1], F, kind, seed=k)
+        save_obj(out / "meshes" / "test" / f"{name}.obj", V2, F2)
+        for sub, text in (("ground_truth", "".join(f"{t}\n" for t in truth)),
+                          ("landmarks", "".join(f"{truth[lms[n]]},{n}\n" for n in LANDMARK_NAMES))):
+            (out / sub).mkdir(exist_ok=True)
+            (out / sub / f"{name}.txt").write_text(text)
+        tests.append(str(out / "meshes" / "test" / f"{name}.obj"))
+        remeshed_info[name] = {"kind": kind, "n_vertices": int(len(V2))}
     (out / "landmark_vids.txt").write_text("".join(f"{lms[n]},{n}\n" for n in LANDMARK_NAMES))
     sparse = {n: lms[n] for n in SPARSE_LANDMARK_NAMES}
     (out / "sparse_landmark_vids.txt").write_text("".join(f"{v},{n}\n" for n, v in sparse.items()))
     return {"out_dir": str(out), "template": str(template), "tests": tests, "landmarks": lms,
             "sparse_landmarks": sparse, "n_vertices": int(len(V)), "n_faces": int(len(F)),
-            "poses": [{k: float(v) for k, v in p.items()} for p in params]}
+            "poses": [{k: float(v) for k, v in p.items()} for p in params], "bodies": bodies,
+            "remeshed": remeshed_info}

@@ -55,6 +55,46 @@ def pair_distances(A, B, *, work_us: int = 0) -> np.ndarray:
     return D.astype(np.float32)
 
 
+@register("synthetic.pair_distances_at", fanout="pair", mirror=_mirror_distances)
+def pair_distances_at(A, B, *, pairs=None) -> np.ndarray:
+    """Squared distances between stacks A (a,8,d) and B (b,8,d), pair by pair: (p,) float32 for the local
+    index pairs ``pairs`` (p,2) of a candidate graph, or the (a, b) block of all pairs when ``pairs`` is None."""
+    A2 = A.reshape(len(A), -1).astype(np.float64)
+    B2 = B.reshape(len(B), -1).astype(np.float64)
+    if pairs is None:
+        return ((A2[:, None, :] - B2[None, :, :]) ** 2).sum(-1).astype(np.float32)
+    return ((A2[pairs[:, 0]] - B2[pairs[:, 1]]) ** 2).sum(-1).astype(np.float32)
+
+
+@register("synthetic.candidates", fanout="once")
+def candidates(items, *, k: int = 2, bad: str = "") -> dict:
+    """Candidate pairs of a collection ``{name: value}``: each item (sorted by name) with the next ``k`` items,
+    cyclically: {"names": [M], "pairs": (P, 2) int64}. ``bad`` returns a broken result for tests: "self" (a
+    pair (i, i)), "range" (an index M), "shape" ((P, 3) pairs), "names" (an unknown name), "float" pairs."""
+    names = sorted(items)
+    m = len(names)
+    pairs = np.array([(i, (i + s) % m) for i in range(m) for s in range(1, k + 1) if (i + s) % m != i],
+                     dtype=np.int64).reshape(-1, 2)
+    if bad == "self":
+        pairs[1] = (2, 2)
+    elif bad == "range":
+        pairs[0] = (0, m)
+    elif bad == "shape":
+        pairs = np.zeros((len(pairs), 3), dtype=np.int64)
+    elif bad == "names":
+        names[0] = "no_such_item"
+    elif bad == "float":
+        pairs = pairs.astype(np.float64)
+    return {"names": names, "pairs": pairs}
+
+
+@register("synthetic.collect_pairs", fanout="once")
+def collect_pairs(distances) -> dict:
+    """The sparse result of a candidate pair stage as received: names, pairs (P,2), values (P,)."""
+    return {"names": list(distances["names"]), "pairs": np.asarray(distances["pairs"]),
+            "values": np.asarray(distances["values"]), "n_pairs": int(len(distances["pairs"]))}
+
+
 @register("synthetic.summarize", fanout="once")
 def summarize(distances, *, sigma: float = 1.0) -> dict:
     """Collection-level metrics from the (N,N) distance matrix: mean affinity at ``sigma``."""

@@ -4,28 +4,31 @@ Steps (each callable on its own; see the modules):
   1. ``basis.mesh_basis``: per-mesh spectral basis, vertex areas, samples, geodesic solver (once per mesh).
   2. initial map: ``init.map_from_points`` (a few points given on both meshes, e.g. the 5 sparse landmarks) or
      ``init.map_automatic`` (nothing given on the target: extremities + assignment search, orientation-aware);
-     both end with ZoomOut (``zoomout``) on the samples.
-  3. ``refine.upsample_spectral`` (every template vertex), then a pointwise step below ZoomOut's floor:
-     ``refine.refine_extrinsic`` (patch-wise rigid ICP, the default) and/or ``refine.refine_geodesic``.
+     both end with ZoomOut (``zoomout``, adjoint point maps) from the template samples to every target vertex.
+  3. ``refine.upsample_spectral`` (every template vertex), then pointwise steps below ZoomOut's floor:
+     ``refine.refine_extrinsic`` (patch-wise rigid ICP) then ``refine.refine_spectral`` (full-resolution ZoomOut
+     with local candidates) by default; ``refine.refine_geodesic`` on request.
   4. ``transfer.transfer_landmarks``; ``measures`` evaluates maps where ground truth exists.
 ``dense_map`` runs them in order. Convention: template = source; a map is (n_template,) int target vertex ids.
+Ids: points given by the user are original vertex ids; maps between the steps are in the bases' local ids (the
+largest connected component, ``basis``); ``map_to_original`` converts, and ``dense_map`` returns original ids.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from corr_core.correspondence.dense.basis import MeshBasis, mesh_basis
+from corr_core.correspondence.dense.basis import MeshBasis, map_to_original, mesh_basis
 from corr_core.correspondence.dense.init import map_automatic, map_from_points
-from corr_core.correspondence.dense.refine import refine_extrinsic, refine_geodesic, upsample_spectral
+from corr_core.correspondence.dense.refine import refine_extrinsic, refine_geodesic, refine_spectral, upsample_spectral
 from corr_core.correspondence.dense.transfer import transfer_landmarks
 
-__all__ = ["MeshBasis", "mesh_basis", "dense_map", "map_from_points", "map_automatic", "upsample_spectral",
-           "refine_extrinsic", "refine_geodesic", "transfer_landmarks"]
+__all__ = ["MeshBasis", "mesh_basis", "map_to_original", "dense_map", "map_from_points", "map_automatic", "upsample_spectral",
+           "refine_extrinsic", "refine_geodesic", "refine_spectral", "transfer_landmarks"]
 
 
 def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarray, F_target: np.ndarray,
               landmarks_template=None, landmarks_target=None, *, k: int = 100, k_init: int = 40,
-              refine: str | None = "extrinsic", basis_template: MeshBasis | None = None,
+              refine: str | None = "extrinsic+spectral", basis_template: MeshBasis | None = None,
               basis_target: MeshBasis | None = None, refine_options: dict | None = None) -> np.ndarray:
     """Dense map template -> target.
 
@@ -35,12 +38,14 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
         landmarks_template, landmarks_target: (L,) int corresponding vertex ids (L >= 3, e.g. the 5 sparse
             landmarks) or both None for the automatic map (no point needed on either mesh).
         k: final spectral basis size (ZoomOut end); k_init: size of the initial functional map.
-        refine: pointwise step after ZoomOut: "extrinsic" (``refine_extrinsic``), "geodesic"
-            (``refine_geodesic``), "geodesic+extrinsic" (both, in that order) or None.
+        refine: pointwise steps after ZoomOut, applied in the order named: "extrinsic+spectral" (default:
+            ``refine_extrinsic`` then ``refine_spectral``), "extrinsic", "spectral", "geodesic"
+            (``refine_geodesic``), "geodesic+extrinsic" or None.
         basis_template, basis_target: precomputed ``mesh_basis`` results (reuse them across pairs).
-        refine_options: {"geodesic": kwargs, "extrinsic": kwargs} for the refinement functions.
+        refine_options: {"geodesic" | "extrinsic" | "spectral": kwargs} for the refinement functions.
     Returns:
-        (n_s,) int64 target vertex id of every template vertex.
+        (n_s,) int64 target vertex id (original ids) of every template vertex; -1 for template vertices off the
+        template's largest connected component (loose pieces, unused vertices: see ``basis``).
     """
     if (landmarks_template is None) != (landmarks_target is None):
         raise ValueError("give landmarks on both meshes (sparse mode) or on neither (automatic mode)")
@@ -55,13 +60,13 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
             raise ValueError(f"landmarks must be two (L,) id lists of equal length L >= 3, got {ls.shape} and "
                              f"{lt.shape}")
         C, p2p_samples = map_from_points(S, T, ls, lt, k_init=k_init, k_end=k)
-    steps = {None: (), "extrinsic": ("extrinsic",), "geodesic": ("geodesic",),
-             "geodesic+extrinsic": ("geodesic", "extrinsic")}
+    steps = {None: (), "extrinsic": ("extrinsic",), "spectral": ("spectral",), "geodesic": ("geodesic",),
+             "extrinsic+spectral": ("extrinsic", "spectral"), "geodesic+extrinsic": ("geodesic", "extrinsic")}
     if refine not in steps:
         raise ValueError(f"refine must be one of {list(steps)}, got {refine!r}")
     options = refine_options or {}
     p2p = upsample_spectral(S, T, C, p2p_samples)
     for step in steps[refine]:
-        fn = refine_geodesic if step == "geodesic" else refine_extrinsic
+        fn = {"geodesic": refine_geodesic, "extrinsic": refine_extrinsic, "spectral": refine_spectral}[step]
         p2p = fn(S, T, p2p, **options.get(step, {}))
-    return p2p
+    return map_to_original(S, T, p2p)

@@ -3,7 +3,14 @@
 ``MeshBasis`` bundles a mesh with what the dense methods need of it: the Laplace-Beltrami eigenpairs (the
 spectral basis), the lumped vertex areas, the surface area, a geodesic (heat-method) solver and a set of
 farthest-point samples. Build it with ``mesh_basis(V, F, k)``; it holds numpy arrays only (plus the lazily built
-``GeodesicSolver``, which is not pickled).
+``GeodesicSolver``, which is not pickled), and ``to_arrays`` / ``from_arrays`` turn it into a plain dict of numpy
+arrays and back (for caches such as zarr).
+
+Vertex ids: the basis is computed on the mesh's largest connected component of referenced vertices
+(``corr_core.geometry.intrinsic.IntrinsicMesh``), so a mesh with loose pieces or unused vertices works. Every
+array of the basis (V, evecs, mass, samples, and the point maps between bases) uses the *local* ids 0..n-1 of that
+component; ``vids`` gives their original ids. ``to_local`` converts original ids (e.g. landmark files) to local
+ones, ``map_to_original`` a local point map to original ids. On a clean mesh both are the identity.
 """
 from __future__ import annotations
 
@@ -12,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from corr_core.geometry import geodesic
+from corr_core.geometry.intrinsic import IntrinsicMesh
 from corr_core.geometry.laplacian import eigenpairs, laplacian_and_mass
 from corr_core.geometry.primitives import face_areas, face_normals
 from corr_core.geometry.sampling import farthest_point_samples
@@ -29,6 +37,8 @@ class MeshBasis:
         mass: (n,) float lumped vertex areas (area units).
         area: float total surface area; ``sqrt(area)`` is the length unit of every error measure.
         samples: (s,) int farthest-point vertex samples (Euclidean, deterministic start).
+        vids: (n,) int original vertex id of each local vertex (None: the identity, nothing was left out).
+        n_full: vertex count of the original mesh (None: n).
     """
 
     V: np.ndarray
@@ -38,6 +48,8 @@ class MeshBasis:
     mass: np.ndarray
     area: float
     samples: np.ndarray
+    vids: np.ndarray | None = None
+    n_full: int | None = None
     _solver: object = field(default=None, repr=False, compare=False)
     _sample_distances: np.ndarray | None = field(default=None, repr=False, compare=False)
 
@@ -69,6 +81,57 @@ class MeshBasis:
             self._sample_distances = more if have == 0 else np.vstack([self._sample_distances, more])
         return self._sample_distances[:m]
 
+    def __post_init__(self):
+        if self.vids is None:
+            self.vids = np.arange(len(self.V), dtype=np.int64)
+        self.vids = np.asarray(self.vids, dtype=np.int64)
+        self.n_full = len(self.V) if self.n_full is None else int(self.n_full)
+        if len(self.vids) != len(self.V) or (len(self.vids) and self.vids.max() >= self.n_full):
+            raise ValueError(f"MeshBasis: vids must be ({len(self.V)},) ids below n_full={self.n_full}")
+
+    def to_local(self, vids, what: str = "vertex", names=None, source: str = "") -> np.ndarray:
+        """Local ids (p,) int64 of original vertex ids (p,) int; a clear error (naming ``what``, ``names``,
+        ``source``) for an id that is not on the kept component."""
+        vids = np.asarray(vids, dtype=np.int64)
+        bad = (vids < 0) | (vids >= self.n_full)
+        if bad.any():
+            raise ValueError(f"{what} id {int(vids[bad][0])}{' from ' + source if source else ''} is outside the "
+                             f"mesh's 0..{self.n_full - 1} vertices")
+        local = np.full(self.n_full, -1, dtype=np.int64)
+        local[self.vids] = np.arange(self.n)
+        out = local[vids]
+        if (out < 0).any():
+            i = int(np.flatnonzero(out < 0)[0])
+            label = f"{what} {names[i]!r} (vertex {int(vids[i])})" if names is not None else f"{what} {int(vids[i])}"
+            raise ValueError(f"{label}{' from ' + source if source else ''} is not on the mesh's largest connected "
+                             f"component ({self.n} of {self.n_full} vertices): it lies on a loose piece or no face "
+                             f"uses it; move it onto the main surface or remove the loose piece")
+        return out
+
+    _ARRAY_KEYS = ("V", "F", "evals", "evecs", "mass", "area", "samples", "vids", "n_full")
+
+    def to_arrays(self) -> dict:
+        """The basis as a plain dict of numpy arrays (``area`` and ``n_full`` as 0-d arrays; the template's cached
+        sample distances as ``sample_distances`` when computed). ``MeshBasis.from_arrays`` inverts it exactly."""
+        out = {key: np.asarray(getattr(self, key)) for key in self._ARRAY_KEYS}
+        if self._sample_distances is not None:
+            out["sample_distances"] = np.asarray(self._sample_distances)
+        return out
+
+    @classmethod
+    def from_arrays(cls, arrays, source: str = "MeshBasis arrays") -> "MeshBasis":
+        """Inverse of ``to_arrays``: arrays is a mapping with the keys of ``to_arrays`` (e.g. a zarr group)."""
+        missing = [key for key in cls._ARRAY_KEYS if key not in arrays]
+        if missing:
+            raise ValueError(f"{source}: missing {missing}; rebuild it with mesh_basis(V, F) and to_arrays()")
+        d = {key: np.asarray(arrays[key]) for key in cls._ARRAY_KEYS}
+        basis = cls(V=d["V"].astype(np.float64), F=d["F"].astype(np.int64), evals=d["evals"], evecs=d["evecs"],
+                    mass=d["mass"], area=float(d["area"]), samples=d["samples"].astype(np.int64),
+                    vids=d["vids"], n_full=int(d["n_full"]))
+        if "sample_distances" in arrays:
+            basis._sample_distances = np.asarray(arrays["sample_distances"])
+        return basis
+
     def __getstate__(self):
         state = dict(self.__dict__)
         state["_solver"] = None
@@ -84,8 +147,6 @@ def _check_mesh(V: np.ndarray, F: np.ndarray, name: str) -> tuple[np.ndarray, np
         raise ValueError(f"{name}: F must be (m,3) triangles, got shape {F.shape}")
     if F.min() < 0 or F.max() >= len(V):
         raise ValueError(f"{name}: face indices must be in 0..{len(V) - 1}, got {F.min()}..{F.max()}")
-    if not np.all(np.isfinite(V)):
-        raise ValueError(f"{name}: vertex positions contain NaN or inf")
     return V, F
 
 
@@ -98,16 +159,33 @@ def mesh_basis(V: np.ndarray, F: np.ndarray, k: int = 100, n_samples: int = 2000
         n_samples: farthest-point samples used by the refinement (clipped to n).
         name: used in error messages.
     Returns:
-        MeshBasis.
+        MeshBasis of the largest connected component (module docstring: local and original ids).
     """
     V, F = _check_mesh(V, F, name)
+    mesh = IntrinsicMesh(V, F)
+    V, F = mesh.V, mesh.F
+    if not np.all(np.isfinite(V)):
+        raise ValueError(f"{name}: vertex positions of the mesh's surface contain NaN or inf")
+    if len(V) < 4:
+        raise ValueError(f"{name}: the largest connected component has only {len(V)} vertices")
     _, M = laplacian_and_mass(V, F)
     evals, evecs = eigenpairs(V, F, k=min(k, len(V) - 1))
     mass = np.asarray(M.diagonal(), dtype=np.float64)
     start = int(np.argmax(np.linalg.norm(V - V.mean(axis=0), axis=1)))
     samples = farthest_point_samples(V, min(n_samples, len(V)), start=start)
     return MeshBasis(V=V, F=F, evals=np.asarray(evals), evecs=np.asarray(evecs), mass=mass,
-                     area=float(face_areas(V, F).sum()), samples=samples)
+                     area=float(face_areas(V, F).sum()), samples=samples, vids=mesh.vids, n_full=mesh.n_full)
+
+
+def map_to_original(source: MeshBasis, target: MeshBasis, p2p: np.ndarray) -> np.ndarray:
+    """A point map in local ids (n_s,) int -> in original ids (source.n_full,) int64: entry i is the original
+    target vertex id of original template vertex i, -1 for template vertices off the template's kept component."""
+    p2p = np.asarray(p2p, dtype=np.int64)
+    if p2p.shape != (source.n,):
+        raise ValueError(f"point map has shape {p2p.shape}, the template basis {source.n} vertices")
+    out = np.full(source.n_full, -1, dtype=np.int64)
+    out[source.vids] = target.vids[p2p]
+    return out
 
 
 def face_gradients(basis: MeshBasis, funcs: np.ndarray) -> np.ndarray:

@@ -117,11 +117,18 @@ def nearest_rows(queries: np.ndarray, points: np.ndarray, chunk: int = 4096) -> 
     return out
 
 
-def p2p_from_fmap(C: np.ndarray, Phi_S_rows: np.ndarray, Phi_T_cands: np.ndarray) -> np.ndarray:
-    """Point map of a functional map: nearest candidate row of Phi_T to each row of Phi_S C.
+def p2p_from_fmap(C: np.ndarray, Phi_S_rows: np.ndarray, Phi_T_cands: np.ndarray, adjoint: bool = True) -> np.ndarray:
+    """Point map of a functional map.
+
+    ``adjoint`` (default, as ZoomOut and pyFM): nearest row of ``Phi_T C^T`` (target deltas pushed to the
+    template's coefficients) to each row of ``Phi_S``; otherwise nearest row of ``Phi_T`` to each row of
+    ``Phi_S C``. The two agree for an orthogonal C; the adjoint one keeps ZoomOut from drifting to a shrunken,
+    non-orthogonal C (seen on the hardest course SCAPE poses).
 
     Args: C: (k_s, k_t); Phi_S_rows: (r, k_s); Phi_T_cands: (c, k_t). Returns (r,) int index into the candidates.
     """
+    if adjoint:
+        return nearest_rows(Phi_S_rows, Phi_T_cands @ C.T)
     return nearest_rows(Phi_S_rows @ C, Phi_T_cands)
 
 

@@ -70,20 +70,32 @@ def fmap_from_points(source: MeshBasis, target: MeshBasis, points_source: np.nda
 
 
 def map_from_points(source: MeshBasis, target: MeshBasis, points_source, points_target, k_init: int = 40,
-                    k_end: int = 100, step: int = 5, features=None,
-                    n_zoomout: int | None = 1000) -> tuple[np.ndarray, np.ndarray]:
+                    k_end: int = 100, step: int = 2, features=None, n_zoomout: int | None = 2000,
+                    all_target_vertices: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Functional map from corresponding points, refined by ZoomOut on the samples.
 
-    ZoomOut iterates on the first ``n_zoomout`` samples of each mesh (None: all); the returned point map is
-    computed at all of them with the final functional map.
+    ZoomOut (adjoint point maps, ``zoomout.zoomout``) iterates on the first ``n_zoomout`` template samples (None:
+    all), matched to every target vertex (``all_target_vertices``) or to the target's first ``n_zoomout`` samples;
+    the returned point map is computed at all template samples with the final functional map. ``points_source`` / ``points_target`` are original
+    vertex ids (as in landmark files; ``MeshBasis.to_local`` converts them).
     Returns: C: (k_end, k_end) functional map, p2p_samples: (len(source.samples),) int target vertex of each
     template sample.
     """
+    points_source = source.to_local(points_source, what="template point")
+    points_target = target.to_local(points_target, what="target point")
     C = fmap_from_points(source, target, points_source, points_target, k=k_init, features=features)
-    C = zoomout.zoomout(source, target, C, k_end=k_end, step=step, n_source=n_zoomout, n_target=n_zoomout)
+    return _zoomout_and_match(source, target, C, k_end, step, n_zoomout, all_target_vertices)
+
+
+def _zoomout_and_match(source: MeshBasis, target: MeshBasis, C: np.ndarray, k_end: int, step: int,
+                       n_zoomout: int | None, all_target_vertices: bool) -> tuple[np.ndarray, np.ndarray]:
+    """ZoomOut, then the target vertex of every template sample: (C (k_end, k_end), (s,) int)."""
+    C = zoomout.zoomout(source, target, C, k_end=k_end, step=step, n_source=n_zoomout, n_target=n_zoomout,
+                        all_target_vertices=all_target_vertices)
     ks, kt = C.shape
-    match = fmaps.p2p_from_fmap(C, source.evecs[source.samples, :ks], target.evecs[target.samples, :kt])
-    return C, target.samples[match]
+    cands = np.arange(target.n) if all_target_vertices else target.samples
+    match = fmaps.p2p_from_fmap(C, source.evecs[source.samples, :ks], target.evecs[cands, :kt])
+    return C, cands[match]
 
 
 def average_geodesic_distance(basis: MeshBasis, n_sources: int = 32) -> np.ndarray:
@@ -207,18 +219,18 @@ def hks_disagreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarr
 
 def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarray | None = None,
                   points_target: np.ndarray | None = None, keep: int = 4, k_init: int = 40, k_probe: int = 60,
-                  k_end: int = 100, step: int = 5, return_info: bool = False):
+                  k_end: int = 100, step: int = 2, return_info: bool = False):
     """A map with no point given on the target (module docstring).
 
     Args:
-        points_source, points_target: feature points of each mesh (default ``extremities`` of each).
+        points_source, points_target: feature points of each mesh, original ids (default ``extremities`` of each).
         keep: candidate assignments evaluated as maps (ZoomOut up to ``k_probe``; the chosen one then goes on
             to ``k_end``).
     Returns: (C, p2p_samples) as ``map_from_points``; with ``return_info`` also a dict (points, the chosen
         assignment, every candidate's cost and disagreement).
     """
-    Ps = extremities(source) if points_source is None else np.asarray(points_source, dtype=np.int64)
-    Pt = extremities(target) if points_target is None else np.asarray(points_target, dtype=np.int64)
+    Ps = extremities(source) if points_source is None else source.to_local(points_source, what="template point")
+    Pt = extremities(target) if points_target is None else target.to_local(points_target, what="target point")
     Gs, Gt = source.distances(Ps), target.distances(Pt)          # (p, n_s), (q, n_t), reused per candidate
     Ds, Dt = Gs[:, Ps], Gt[:, Pt]
     candidates = ranked_assignments(0.5 * (Ds + Ds.T), 0.5 * (Dt + Dt.T), keep=keep)
@@ -226,8 +238,9 @@ def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarra
     for s, t, cost in candidates:
         FS = point_features(source, Ps[s], distances=Gs[s])
         FT = point_features(target, Pt[t], distances=Gt[t])
-        C, p2p = map_from_points(source, target, Ps[s], Pt[t], k_init=k_init, k_end=min(k_probe, k_end),
-                                 step=step, features=(FS, FT))
+        C, p2p = map_from_points(source, target, source.vids[Ps[s]], target.vids[Pt[t]], k_init=k_init,
+                                 k_end=min(k_probe, k_end), step=5, features=(FS, FT), n_zoomout=1000,
+                                 all_target_vertices=False)
         info["candidates"].append({"source": s, "target": t, "distortion": cost, "map": (C, p2p),
                                    "orientation": orientation_agreement(source, target, p2p),
                                    "hks": hks_disagreement(source, target, p2p)})
@@ -238,9 +251,5 @@ def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarra
     s, t = chosen["source"], chosen["target"]
     info["chosen"] = (Ps[s], Pt[t])
     C, p2p = chosen["map"]
-    if min(C.shape) < k_end:
-        C = zoomout.zoomout(source, target, C, k_end=k_end, step=step, n_source=1000, n_target=1000)
-        ks, kt = C.shape
-        p2p = target.samples[fmaps.p2p_from_fmap(C, source.evecs[source.samples, :ks],
-                                                 target.evecs[target.samples, :kt])]
+    C, p2p = _zoomout_and_match(source, target, C, k_end, step, 2000, True)
     return (C, p2p, info) if return_info else (C, p2p)

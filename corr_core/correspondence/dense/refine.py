@@ -18,13 +18,54 @@ from scipy.spatial import cKDTree
 from corr_core.correspondence.dense.basis import MeshBasis
 
 
+def _local_spectral_match(emb_s: np.ndarray, emb_t: np.ndarray, cands: np.ndarray) -> np.ndarray:
+    """Among each row's candidates (n_s, c) int, the target vertex whose embedding row (n_t, d) is nearest to the
+    template vertex's embedding row (n_s, d): (n_s,) int (ties: the first candidate)."""
+    emb_s = emb_s.astype(np.float32)
+    emb_t = emb_t.astype(np.float32)
+    out = np.empty(len(cands), dtype=np.int64)
+    for s in range(0, len(cands), 2048):                                 # chunks bound memory (c * d each)
+        c = cands[s:s + 2048]
+        d = np.sum((emb_t[c] - emb_s[s:s + 2048, None, :]) ** 2, axis=2)
+        out[s:s + 2048] = c[np.arange(len(c)), np.argmin(d, axis=1)]
+    return out
+
+
+def refine_spectral(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, k: int | None = None,
+                    iterations: int = 5, n_candidates: int = 32) -> np.ndarray:
+    """ZoomOut at full resolution and fixed ``k``, with local candidates (cost independent of n_s * n_t).
+
+    Each round fits the least-squares functional map of the current map on *every* template vertex (``k`` basis
+    functions, default all the bases have), then moves each template vertex to the target vertex, among the
+    ``n_candidates`` nearest (3D) to its current image, nearest in the adjoint spectral embedding
+    (``fmaps.p2p_from_fmap``). It removes the quantization of a map known at samples and the small slides the
+    extrinsic refinement leaves along smooth surfaces. Stops early when the map no longer changes.
+
+    Args: source, target: bases; p2p: (n_s,) int current map (local ids). Returns (n_s,) int.
+    """
+    from corr_core.correspondence.dense.fmaps import fmap_from_p2p
+
+    p2p = np.asarray(p2p, dtype=np.int64).copy()
+    k = int(min(k or source.evecs.shape[1], source.evecs.shape[1], target.evecs.shape[1]))
+    tree = cKDTree(target.V)
+    n_candidates = min(n_candidates, target.n)
+    for _ in range(iterations):
+        C = fmap_from_p2p(p2p, source.evecs[:, :k], target.evecs[:, :k])
+        _, cands = tree.query(target.V[p2p], k=n_candidates)
+        new = _local_spectral_match(source.evecs[:, :k], target.evecs[:, :k] @ C.T, cands)
+        if np.array_equal(new, p2p):
+            break
+        p2p = new
+    return p2p
+
+
 def upsample_spectral(source: MeshBasis, target: MeshBasis, C: np.ndarray, p2p_samples: np.ndarray,
                       n_candidates: int = 32) -> np.ndarray:
     """Point map of every template vertex from a map known at the template samples and a functional map.
 
     Each template vertex starts at the image of its nearest template sample (3D) and then takes, among the
-    ``n_candidates`` target vertices nearest (3D) to that image, the one nearest in the spectral embedding of
-    ``C`` (the ZoomOut point map restricted to a neighbourhood; exact brute force would cost n_s * n_t * k).
+    ``n_candidates`` target vertices nearest (3D) to that image, the one nearest in the adjoint spectral embedding
+    of ``C`` (the ZoomOut point map restricted to a neighbourhood; exact brute force would cost n_s * n_t * k).
 
     Args:
         source, target: bases; C: (k_s, k_t) functional map (template x target).
@@ -38,14 +79,7 @@ def upsample_spectral(source: MeshBasis, target: MeshBasis, C: np.ndarray, p2p_s
     n_candidates = min(n_candidates, target.n)
     _, cands = cKDTree(target.V).query(target.V[start], k=n_candidates)   # (n_s, c)
     ks, kt = C.shape
-    emb_s = (source.evecs[:, :ks] @ C).astype(np.float32)                # (n_s, kt)
-    emb_t = target.evecs[:, :kt].astype(np.float32)
-    out = np.empty(source.n, dtype=np.int64)
-    for s in range(0, source.n, 2048):                                   # chunks bound memory (c * kt each)
-        c = cands[s:s + 2048]
-        d = np.sum((emb_t[c] - emb_s[s:s + 2048, None, :]) ** 2, axis=2)
-        out[s:s + 2048] = c[np.arange(len(c)), np.argmin(d, axis=1)]
-    return out
+    return _local_spectral_match(source.evecs[:, :ks], target.evecs[:, :kt] @ C.T, cands)
 
 
 def refine_geodesic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, n_anchors: int = 100,

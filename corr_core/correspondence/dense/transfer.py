@@ -19,4 +19,9 @@ def transfer_landmarks(p2p: np.ndarray, landmark_vids) -> np.ndarray:
     bad = vids[(vids < 0) | (vids >= len(p2p))]
     if len(bad):
         raise ValueError(f"landmark ids {bad.tolist()} are outside the template's 0..{len(p2p) - 1} vertices")
-    return p2p[vids]
+    placed = p2p[vids]
+    if (placed < 0).any():
+        lost = vids[placed < 0].tolist()
+        raise ValueError(f"template landmarks at vertices {lost} have no image: they are off the template's largest "
+                         "connected component (a loose piece or an unused vertex); move them onto the main surface")
+    return placed

@@ -11,11 +11,12 @@ from __future__ import annotations
 import numpy as np
 
 from corr_core.correspondence.dense.basis import MeshBasis
-from corr_core.correspondence.dense.fmaps import fmap_from_p2p, nearest_rows, p2p_from_fmap
+from corr_core.correspondence.dense.fmaps import fmap_from_p2p, p2p_from_fmap
 
 
 def zoomout(source: MeshBasis, target: MeshBasis, C: np.ndarray, k_end: int = 100, step: int = 5,
-            n_source: int | None = None, n_target: int | None = None) -> np.ndarray:
+            n_source: int | None = None, n_target: int | None = None, all_target_vertices: bool = False,
+            adjoint: bool = True) -> np.ndarray:
     """Refine a functional map by ZoomOut on the meshes' samples.
 
     Args:
@@ -23,16 +24,19 @@ def zoomout(source: MeshBasis, target: MeshBasis, C: np.ndarray, k_end: int = 10
         C: (k0, k0') initial functional map (template x target); k_start = min(k0, k0').
         k_end: final basis size; step: growth of k per iteration.
         n_source, n_target: how many of the meshes' farthest-point samples to use (default all of them).
+        all_target_vertices: match the template samples to every target vertex (not only to its samples: no
+            quantization to the sample spacing; costs n_source * n_t * k per iteration).
+        adjoint: point maps as ``fmaps.p2p_from_fmap(adjoint=...)``.
     Returns:
         C: (k_end, k_end) refined functional map.
     """
     k_end = int(min(k_end, source.evecs.shape[1], target.evecs.shape[1]))
     rows = source.samples[:n_source]
-    cands = target.samples[:n_target]
+    cands = np.arange(target.n) if all_target_vertices else target.samples[:n_target]
     k = min(C.shape)
     C = C[:k, :k]
     while True:
-        match = p2p_from_fmap(C, source.evecs[rows, :k], target.evecs[cands, :k])
+        match = p2p_from_fmap(C, source.evecs[rows, :k], target.evecs[cands, :k], adjoint=adjoint)
         if k >= k_end:
             return C
         k = min(k + step, k_end)
@@ -52,7 +56,7 @@ def zoomout_from_p2p(source: MeshBasis, target: MeshBasis, p2p_rows: np.ndarray,
     return zoomout(source, target, C, k_end=k_end, step=step, n_source=n_source, n_target=n_target)
 
 
-def p2p_full(source: MeshBasis, target: MeshBasis, C: np.ndarray) -> np.ndarray:
+def p2p_full(source: MeshBasis, target: MeshBasis, C: np.ndarray, adjoint: bool = True) -> np.ndarray:
     """Every template vertex's nearest target vertex in the spectral embedding of C: (n_s,) int."""
     ks, kt = C.shape
-    return nearest_rows(source.evecs[:, :ks] @ C, target.evecs[:, :kt])
+    return p2p_from_fmap(C, source.evecs[:, :ks], target.evecs[:, :kt], adjoint=adjoint)

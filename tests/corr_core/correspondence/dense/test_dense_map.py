@@ -129,3 +129,35 @@ def test_bad_input_is_named(body):
         _run(body, body["Vp"], body["F"], body["T"], sparse_target=body["sparse"], refine="smooth")
     with pytest.raises(ValueError, match="target: F must be"):
         dense_map(body["V"], body["F"], body["Vp"], body["F"][:, :2], k=K)
+
+
+def test_mesh_basis_round_trips_through_a_dict_of_arrays(body):
+    from corr_core.correspondence.dense import MeshBasis
+
+    S = body["S"]
+    S.sample_distances(5)
+    arrays = S.to_arrays()
+    assert all(isinstance(v, np.ndarray) for v in arrays.values())
+    back = MeshBasis.from_arrays(arrays)
+    for key in ("V", "F", "evals", "evecs", "mass", "samples", "vids"):
+        assert np.array_equal(getattr(back, key), getattr(S, key)), key
+    assert back.area == S.area and back.n_full == S.n_full
+    assert np.array_equal(back.sample_distances(5), S.sample_distances(5))
+    with pytest.raises(ValueError, match="missing \\['evecs'\\]"):
+        MeshBasis.from_arrays({k: v for k, v in arrays.items() if k != "evecs"})
+
+
+def test_loose_pieces_and_unused_vertices_keep_original_ids(body):
+    """A target with a far unused vertex at 1e30 first and a loose triangle: same map, ids shifted by one."""
+    V_t, F_t = body["Vp"], body["F"]
+    loose = V_t[:3] + np.array([5.0, 0.0, 0.0])
+    V_dirty = np.vstack([[[1e30, 1e30, 1e30]], V_t, loose])
+    F_dirty = np.vstack([F_t + 1, len(V_t) + 1 + np.array([[0, 1, 2]])])
+    B_dirty = _basis(V_dirty, F_dirty)
+    assert B_dirty.n == len(V_t) and B_dirty.n_full == len(V_dirty)
+    sparse = body["sparse"]
+    clean = _run(body, V_t, F_t, body["T"], sparse_target=sparse)
+    dirty = _run(body, V_dirty, F_dirty, B_dirty, sparse_target=sparse + 1)
+    assert np.array_equal(dirty, clean + 1)
+    with pytest.raises(ValueError, match="largest connected component"):
+        _run(body, V_dirty, F_dirty, B_dirty, sparse_target=np.r_[sparse[:-1], len(V_t) + 1])

@@ -125,3 +125,26 @@ def test_orientation_term_prefers_the_orientation_preserving_map(ellipsoid):
     energy = lambda C: sum(np.sum((C @ Om[i] - Om[i] @ C) ** 2) for i in range(len(Om)))
     assert energy(C_id) < 1e-12
     assert energy(C_mirror) > 0.1 * float(np.sum(Om**2))
+
+
+def test_adjoint_point_map_of_an_orthogonal_map_equals_the_direct_one(ellipsoid):
+    _, _, B = ellipsoid
+    rng = np.random.default_rng(0)
+    Q, _ = np.linalg.qr(rng.normal(size=(12, 12)))
+    rows = B.evecs[:50, :12]
+    direct = fmaps.p2p_from_fmap(Q, rows, B.evecs[:, :12], adjoint=False)
+    assert np.array_equal(fmaps.p2p_from_fmap(Q, rows, B.evecs[:, :12], adjoint=True), direct)
+    assert np.array_equal(direct, fmaps.nearest_rows(rows @ Q, B.evecs[:, :12]))
+
+
+def test_refine_spectral_undoes_a_one_ring_scramble(ellipsoid):
+    from corr_core.correspondence.dense import refine_spectral
+    from corr_core.geometry.primitives import vertex_adjacency
+
+    V, F, B = ellipsoid
+    A = vertex_adjacency(F, len(V)).tocsr()
+    rng = np.random.default_rng(1)
+    scrambled = np.array([rng.choice(A.indices[A.indptr[i]:A.indptr[i + 1]]) if rng.random() < 0.5 else i
+                          for i in range(len(V))])
+    fixed = refine_spectral(B, B, scrambled, iterations=5, n_candidates=16)
+    assert np.mean(fixed == np.arange(len(V))) > 0.95 > np.mean(scrambled == np.arange(len(V)))

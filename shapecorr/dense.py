@@ -1,0 +1,205 @@
+"""Stage wiring for dense correspondence (every template vertex -> a target vertex) and landmark transfer.
+
+Per mesh (cached, shared by both methods): ``corr.dense_basis`` (Laplace-Beltrami eigenpairs, vertex areas,
+farthest-point samples; ``corr_core.correspondence.dense.mesh_basis``) as plain arrays.
+Per test mesh: ``corr.dense_init`` -- the initial map, ``mode`` "sparse" (the 5 sparse landmarks given on both
+meshes: ``dense_sparse``) or "auto" (nothing given on the target: ``dense_auto``); ``corr.dense_refine`` -- the
+full-resolution map and its pointwise refinement (its own stage: changing its params reruns only it and the
+evaluation); ``corr.dense_measures`` -- errors against the ground truth, where there is one.
+Once: ``corr.place_landmarks`` (the template's landmarks placed on every target, published as files), and the
+summaries in ``corr.evaluate`` (``dense_reports``).
+
+Ground truth of a test mesh: vertex i <-> vertex i when it has the template's vertex count and triangles, else
+``ground_truth/<mesh>.txt`` (one target vertex id per template vertex, a line each), else none (maps and placed
+landmarks are still produced, without error numbers). Its true landmarks: ``landmarks/<mesh>.txt``, else the
+shared landmark file on a mesh numbered like the template, else the ground-truth map applied to the template's.
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from corr_core import plotting
+from corr_core.correspondence import dense, measures
+from corr_core.correspondence.dense import measures as dense_measures_lib
+from corr_core.correspondence.dense.basis import MeshBasis, map_to_original
+from corr_core.correspondence.landmarks import read_landmarks
+from corr_core.geometry.intrinsic import IntrinsicMesh
+from corr_core.geometry.primitives import same_triangles
+from corr_core.geometry.sampling import farthest_point_samples
+
+from stages.registry import register
+
+from .landmark_sources import _sparse_index, mesh_landmarks
+
+METHODS = ("dense_sparse", "dense_auto")
+KIM_LABELS = {"mobius": "Möbius (best map)", "dense_sparse": "dense_sparse (5 points)",
+              "dense_auto": "dense_auto (no points)"}
+
+
+@register("corr.dense_basis", group="correspondence", fanout="item")
+def dense_basis(mesh, *, k: int = 100, n_samples: int = 2000) -> dict:
+    """Spectral basis of one mesh's largest component: ``MeshBasis.to_arrays()`` -- {"V", "F", "evals": (k,),
+    "evecs": (n,k), "mass": (n,), "area", "samples": (n_samples,), "vids": (n,) original ids, "n_full"}."""
+    return dense.mesh_basis(mesh["V"], mesh["F"], k=k, n_samples=n_samples, name=mesh["name"]).to_arrays()
+
+
+def _basis(arrays: dict, what: str) -> MeshBasis:
+    return MeshBasis.from_arrays(arrays, source=f"corr.dense_basis of the {what}")
+
+
+@register("corr.dense_init", group="correspondence", fanout="item")
+def dense_init(template_basis, target_basis, template_mesh, target_mesh, landmarks, sparse_landmarks,
+               landmark_files=None, *, mode: str = "auto", k_init: int = 40, k_end: int = 100) -> dict:
+    """Initial map template -> target: a functional map refined by ZoomOut and the point map of the template
+    samples. mode "sparse": from the sparse landmarks given on both meshes (a target without landmarks is
+    skipped: {"skipped": why}); "auto": from nothing on the target (extremities, orientation-aware).
+
+    Returns {"C": (k_end, k_end) float, "p2p_samples": (s,) int local target ids, "mode": str}.
+    """
+    if mode not in ("sparse", "auto"):
+        raise ValueError(f"corr.dense_init: mode must be 'sparse' or 'auto', got {mode!r}")
+    S, T = _basis(template_basis, "template"), _basis(target_basis, "target")
+    if mode == "auto":
+        C, p2p = dense.map_automatic(S, T, k_init=k_init, k_end=k_end)
+        return {"C": C, "p2p_samples": p2p, "mode": mode}
+    target_ids, source = mesh_landmarks(target_mesh, landmarks, landmark_files, template_mesh)
+    if target_ids is None:
+        return {"skipped": f"{source} (dense_sparse needs the sparse landmarks on the target)"}
+    template_ids, _ = mesh_landmarks(template_mesh, landmarks, landmark_files, template_mesh)
+    sparse = _sparse_index(landmarks, sparse_landmarks)
+    C, p2p = dense.map_from_points(S, T, template_ids[sparse], target_ids[sparse], k_init=k_init, k_end=k_end)
+    return {"C": C, "p2p_samples": p2p, "mode": mode}
+
+
+@register("corr.dense_refine", group="correspondence", fanout="item")
+def dense_refine(template_basis, target_basis, initial, *, refine: str = "extrinsic", n_patches: int = 300,
+                 patch_size: int = 64, rounds: int = 5, icp_iterations: int = 6) -> dict:
+    """The dense map: the initial map upsampled to every template vertex (``upsample_spectral``), then refined
+    (``refine``: "extrinsic" = patch-wise rigid ICP, "none"). Returns {"vertex_map": (n_template,) int target
+    vertex id (original ids; -1 off the template's kept component)} or {"skipped": why}."""
+    if "skipped" in initial:
+        return {"skipped": initial["skipped"]}
+    if refine not in ("extrinsic", "none"):
+        raise ValueError(f"corr.dense_refine: refine must be 'extrinsic' or 'none', got {refine!r}")
+    S, T = _basis(template_basis, "template"), _basis(target_basis, "target")
+    p2p = dense.upsample_spectral(S, T, np.asarray(initial["C"]), np.asarray(initial["p2p_samples"]))
+    if refine == "extrinsic":
+        p2p = dense.refine_extrinsic(S, T, p2p, n_patches=n_patches, patch_size=patch_size, rounds=rounds,
+                                     icp_iterations=icp_iterations)
+    return {"vertex_map": map_to_original(S, T, p2p)}
+
+
+def _given_maps(inputs: dict) -> dict:
+    """{method: {mesh: (n_template,) int}} of the dense results that have a map."""
+    return {method: {m: np.asarray(r["vertex_map"], np.int64) for m, r in sorted((res or {}).items())
+                     if "vertex_map" in r} for method, res in inputs.items() if res}
+
+
+def _write_landmarks(path: str, ids: np.ndarray, names: list[str]) -> None:
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write("".join(f"{int(v)},{n}\n" for v, n in zip(ids, names)))
+
+
+@register("corr.place_landmarks", group="correspondence", fanout="once", writes_files=True)
+def place_landmarks(template_mesh, landmarks, dense_sparse=None, dense_auto=None, *, out_dir: str) -> dict:
+    """The template's landmarks placed on every test mesh through each dense map (``transfer_landmarks``).
+    Files: ``<method>/<mesh>.txt`` (``vid,Name`` lines, 0-based target vertex ids, the template's names).
+
+    Returns {"placed": {method: {mesh: (L,) int}}, "names": [L names], "files": [relative paths]}.
+    """
+    ids, names = read_landmarks(landmarks, n_vertices=len(template_mesh["V"]))
+    placed, files = {}, []
+    for method, maps in _given_maps({"dense_sparse": dense_sparse, "dense_auto": dense_auto}).items():
+        placed[method] = {m: dense.transfer_landmarks(vm, ids) for m, vm in maps.items()}
+        for m, target_ids in placed[method].items():
+            files.append(f"{method}/{m}.txt")
+            _write_landmarks(os.path.join(out_dir, files[-1]), target_ids, names)
+    return {"placed": placed, "names": list(names), "files": files}
+
+
+def _true_map(template_mesh: dict, target_mesh: dict, ground_truth, name: str) -> tuple[np.ndarray | None, str]:
+    """(n_template,) int true target vertex of each template vertex and where it comes from, or (None, why)."""
+    n_s, n_t = len(template_mesh["V"]), len(target_mesh["V"])
+    if n_s == n_t and same_triangles(np.asarray(target_mesh["F"]), np.asarray(template_mesh["F"])):
+        return np.arange(n_s), "identity"
+    path = os.path.join(ground_truth, f"{name}.txt") if ground_truth else ""
+    if not os.path.isfile(path):
+        return None, (f"{name}: {n_t} vertices / other triangles than the template ({n_s}) and no "
+                      f"ground_truth/{name}.txt: no dense ground truth, errors not measured")
+    truth = np.loadtxt(path, dtype=np.int64, ndmin=1)
+    if truth.shape != (n_s,) or truth.min() < 0 or truth.max() >= n_t:
+        raise ValueError(f"{path}: must hold {n_s} target vertex ids (one per template vertex, a line each) in "
+                         f"0..{n_t - 1}; got {truth.size} ids in {truth.min()}..{truth.max()}")
+    return truth, "file"
+
+
+def _true_landmarks(template_mesh, target_mesh, landmarks, landmark_files, truth) -> np.ndarray | None:
+    """(L,) int the target's true landmark vertices (own file, shared file, or the truth map), or None."""
+    ids, _ = mesh_landmarks(target_mesh, landmarks, landmark_files, template_mesh)
+    if ids is None and truth is not None:
+        ids = truth[read_landmarks(landmarks, n_vertices=len(template_mesh["V"]))[0]]
+    return ids
+
+
+@register("corr.dense_measures", group="correspondence", fanout="item")
+def dense_measures(template_mesh, target_mesh, landmarks, landmark_files=None, ground_truth=None, mobius=None,
+                   dense_sparse=None, dense_auto=None, *, n_points: int = 2000, item_name: str = "") -> dict:
+    """Errors of every dense map of one test mesh (geodesic on the target / sqrt(its area), heat method) at
+    ``n_points`` farthest-point template vertices (all when fewer), and of the placed landmarks.
+
+    Returns {"errors": {method: (p,)}, "truth": "identity" | "file", "landmark_errors": {method: (L,)},
+    "nearest": {method: (L,) index of the true landmark nearest to each placed one}}; without a true map
+    {"no_truth": why} and the landmark measures when the target's landmarks are known.
+    """
+    name = item_name or os.path.splitext(target_mesh["name"])[0]
+    maps = {k: np.asarray(r["vertex_map"], np.int64) for k, r in
+            (("mobius", mobius), ("dense_sparse", dense_sparse), ("dense_auto", dense_auto)) if r and "vertex_map" in r}
+    truth, source = _true_map(template_mesh, target_mesh, ground_truth, name)
+    out = {"truth": source} if truth is not None else {"no_truth": source}
+    Vt, Ft = np.asarray(target_mesh["V"]), np.asarray(target_mesh["F"])
+    if truth is not None:
+        sub = IntrinsicMesh(template_mesh["V"], template_mesh["F"])
+        vertices = sub.vids[farthest_point_samples(sub.V, min(n_points, len(sub.V)))]
+        out["errors"] = dense_measures_lib.dense_errors(Vt, Ft, maps, truth, vertices=vertices)
+    true_lms = _true_landmarks(template_mesh, target_mesh, landmarks, landmark_files, truth)
+    if true_lms is not None:
+        ids, _ = read_landmarks(landmarks, n_vertices=len(template_mesh["V"]))
+        placed = {k: dense.transfer_landmarks(vm, ids) for k, vm in maps.items() if k in METHODS}
+        pairs = {k: dense_measures_lib.landmark_errors(Vt, Ft, p, true_lms) for k, p in placed.items()}
+        out["landmark_errors"] = {k: e for k, (e, _) in pairs.items()}
+        out["nearest"] = {k: n for k, (_, n) in pairs.items()}
+    return out
+
+
+def _skipped(results: dict | None) -> dict:
+    return {m: r["skipped"] for m, r in sorted((results or {}).items()) if "skipped" in r}
+
+
+def dense_reports(names: list[str], dense_sparse, dense_auto, per_mesh, out_dir: str) -> tuple[dict, dict]:
+    """The dense part of ``corr.evaluate``: (method reports for the landmark accuracy, like the course
+    methods', {mesh: {"all": nearest}}), and the summary {"dense": {method: summary}, "landmark_error":
+    {method: mean}, "dense_n_points", "dense_skipped", "dense_not_measured"}; writes ``kim_curves.png``."""
+    per_mesh = dict(sorted((per_mesh or {}).items()))
+    preds = {method: {m: np.asarray(r["nearest"][method]) for m, r in per_mesh.items()
+                      if method in r.get("nearest", {})} for method in METHODS}
+    out: dict = {"dense_skipped": {k: v for k, v in (("dense_sparse", _skipped(dense_sparse)),
+                                                     ("dense_auto", _skipped(dense_auto))) if v},
+                 "dense_not_measured": {m: r["no_truth"] for m, r in per_mesh.items() if "no_truth" in r}}
+    errors = {method: np.concatenate([r["errors"][method] for r in per_mesh.values()
+                                      if method in r.get("errors", {})] or [np.zeros(0)])
+              for method in ("mobius",) + METHODS}
+    errors = {k: v for k, v in errors.items() if v.size}
+    out["dense"] = {k: dense_measures_lib.summary(e) for k, e in errors.items() if k in METHODS}
+    out["dense_n_points"] = {k: int(e.size) for k, e in errors.items()}
+    lm = {method: [r["landmark_errors"][method] for r in per_mesh.values() if method in r.get("landmark_errors", {})]
+          for method in METHODS}
+    out["landmark_error"] = {k: float(np.mean(np.concatenate(v))) for k, v in lm.items() if v}
+    if errors:
+        t = dense_measures_lib.KIM_THRESHOLDS
+        plotting.plot_error_curves({KIM_LABELS[k]: (t, dense_measures_lib.kim_curve(e)) for k, e in errors.items()},
+                                   os.path.join(out_dir, "kim_curves.png"))
+    reports = {method: measures.method_report(p, names) for method, p in preds.items() if p}
+    return reports, {k: v for k, v in out.items() if v}

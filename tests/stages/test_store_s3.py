@@ -1,0 +1,314 @@
+"""The cache on object storage (``--cache s3://bucket/prefix``) against a real S3-compatible server.
+
+The server is moto in server mode (a real HTTP endpoint on 127.0.0.1, started here), reached through s3fs and
+zarr's fsspec store exactly as an AWS or MinIO endpoint would be (``AWS_ENDPOINT_URL``). Skipped, with the
+reason, when the ``s3`` / ``test`` extras (s3fs, moto[server]) are not installed.
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+import uuid
+
+import numpy as np
+import pytest
+
+pytest.importorskip("s3fs", reason="s3fs is not installed (pip install -e '.[s3,test]')")
+pytest.importorskip("moto.server", reason="moto is not installed (pip install -e '.[test]')")
+pytest.importorskip("flask", reason="moto's server mode needs flask (pip install 'moto[server]')")
+
+from stages import api  # noqa: E402
+from stages.errors import CorruptEntry, UserError  # noqa: E402
+from stages.store import Store  # noqa: E402
+
+from tests.helpers import SYNTHETIC_YAML, executed, free_port, make_project, plugins_env, run_quiet  # noqa: E402
+
+S3_ENV = {"AWS_ACCESS_KEY_ID": "testing", "AWS_SECRET_ACCESS_KEY": "testing", "AWS_DEFAULT_REGION": "us-east-1"}
+
+
+@pytest.fixture(scope="module")
+def s3_endpoint():
+    """A moto S3 server on a free port for this module; the AWS_* variables point every client at it."""
+    import logging
+
+    from moto.server import ThreadedMotoServer
+
+    logging.getLogger("werkzeug").setLevel(logging.ERROR)  # no line per request
+
+    port = free_port()
+    server = ThreadedMotoServer(ip_address="127.0.0.1", port=port, verbose=False)
+    server.start()
+    env = {**S3_ENV, "AWS_ENDPOINT_URL": f"http://127.0.0.1:{port}"}
+    saved = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
+    yield env
+    for k, v in saved.items():
+        if v is None:
+            os.environ.pop(k, None)
+        else:
+            os.environ[k] = v
+    server.stop()
+
+
+@pytest.fixture()
+def s3fs_client(s3_endpoint):
+    import fsspec
+    return fsspec.filesystem("s3", use_listings_cache=False)
+
+
+@pytest.fixture()
+def bucket(s3fs_client):
+    name = "b" + uuid.uuid4().hex[:12]
+    s3fs_client.mkdir(name)
+    return name
+
+
+@pytest.fixture()
+def project(tmp_path, monkeypatch, bucket):
+    """The synthetic pipeline in tmp_path with its cache at s3://BUCKET/cache (local part under tmp_path)."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("STAGES_LOCAL_CACHE", str(tmp_path / "local"))
+    p = make_project(tmp_path, n=8)
+    return p, f"s3://{bucket}/cache"
+
+
+def _feat_key(path, cache) -> str:
+    plan = api.plan_pipeline(str(path), cache_dir=cache, quiet=True)
+    return plan.stages["feat"].tasks[0].key
+
+
+def test_run_noop_and_param_change_on_s3(project, tmp_path, s3fs_client, s3_endpoint):
+    """A cold run on a dask worker process, then in this process: a no-op, and a changed parameter."""
+    path, cache = project
+    proc = _cli(["run", str(path), "--cache", cache, "--workers", "1", "--quiet", "--summary-json", "s.json"],
+                tmp_path, s3_endpoint, str(tmp_path / "local"))
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    first = json.loads((tmp_path / "s.json").read_text())
+    assert all(n > 0 for n in executed(first).values())
+    assert s3fs_client.isfile(f"{cache}/.stages-cache")
+    assert s3fs_client.find(f"{cache}/manifest"), "the entries are on the object store"
+    assert not os.path.exists(tmp_path / "local" / "s3" / cache[5:] / "manifest")  # ... not in the local part
+    local = run_quiet(path, cache_dir=str(tmp_path / "local-cache"), output_dir=str(tmp_path / "out-local"))
+    assert executed(local) == executed(first)
+    s3_plan = api.plan_pipeline(str(path), cache_dir=cache, quiet=True)
+    local_plan = api.plan_pipeline(str(path), cache_dir=str(tmp_path / "local-cache"), quiet=True)
+    assert [t.key for t in s3_plan.tasks()] == [t.key for t in local_plan.tasks()]  # the same cache keys
+    assert api.metrics(s3_plan) == api.metrics(local_plan)
+
+    assert set(executed(run_quiet(path, cache_dir=cache)).values()) == {0}  # no-op: nothing computed
+    changed = executed(run_quiet(path, cache_dir=cache, overrides=["sigma=2.0"]))
+    assert changed == {"feat": 0, "dist": 0, "summary": 1, "rep": 1}
+    assert (tmp_path / "results" / "syn" / "rep" / "summary.txt").read_text().startswith("synthetic: 8 items")
+
+
+DAMAGES = ("deleted", "truncated", "edited", "array-gone")
+
+
+def test_unusable_entries_are_recomputed_with_a_warning(project, s3fs_client, capsys):
+    """Four per-item entries, each damaged another way: each is missing for status and recomputed by the next
+    run, with a warning naming the manifest when one is there but unusable; nothing else runs again."""
+    path, cache = project
+    run_quiet(path, cache_dir=cache)
+    tasks = api.plan_pipeline(str(path), cache_dir=cache, quiet=True).stages["feat"].tasks[:len(DAMAGES)]
+    manifests = {}
+    for damage, task in zip(DAMAGES, tasks):
+        key = task.key
+        manifest = manifests[damage] = f"{cache}/manifest/{key[:2]}/{key}.json"
+        text = s3fs_client.cat_file(manifest).decode()
+        if damage == "deleted":
+            s3fs_client.rm_file(manifest)
+        elif damage == "truncated":
+            s3fs_client.pipe_file(manifest, text[: len(text) // 2].encode())
+        elif damage == "edited":  # valid JSON, one inline value changed: the manifest's checksum catches it
+            s3fs_client.pipe_file(manifest, text.replace('"feat"', '"fake"').encode())
+        else:
+            writer = json.loads(text)["location"]
+            s3fs_client.rm_file(f"{cache}/objects/{key[:2]}/{key}/{writer}/a0.zarr/zarr.json")
+    capsys.readouterr()
+    assert {r["stage"]: r["to_run"] for r in api.status(str(path), cache_dir=cache)}["feat"] == len(DAMAGES)
+    summary = run_quiet(path, cache_dir=cache)
+    assert executed(summary) == {"feat": len(DAMAGES), "dist": 0, "summary": 0, "rep": 0}  # same content
+    err = capsys.readouterr().err
+    for damage in DAMAGES[1:]:
+        assert f"cache entry {manifests[damage]}" in err, damage
+    store = Store(cache)
+    assert all(store.has(t.key) for t in tasks)
+
+
+def test_a_changed_array_fails_its_checksum(project, s3fs_client):
+    path, cache = project
+    run_quiet(path, cache_dir=cache)
+    key = _feat_key(path, cache)
+    store = Store(cache)
+    good = store.get(key)
+    writer = store.manifest(key)["location"]
+    from stages.store import _READ_CACHE
+    import zarr
+    arr = zarr.open_array(store=store._zarr_store(f"{store.object_path(key)}/{writer}/a0.zarr", read_only=False),
+                          mode="r+", zarr_format=3)
+    arr[0, 0] = arr[0, 0] + 1  # a valid chunk with other content
+    _READ_CACHE.drop(key)
+    with pytest.raises(CorruptEntry, match="checksum"):
+        store.get(key)
+    arr[0, 0] = good[0, 0]  # the original content again: it verifies
+    _READ_CACHE.drop(key)
+    np.testing.assert_array_equal(store.get(key), good)
+
+
+def test_two_writers_of_one_entry_store_it_once(s3_endpoint, bucket, s3fs_client, tmp_path, monkeypatch):
+    """Both writers have written their data before either writes its manifest: the first manifest wins, the
+    other writer keeps it and deletes its own data; the entry is complete and reads back the value."""
+    monkeypatch.setenv("STAGES_LOCAL_CACHE", str(tmp_path / "local"))
+    from stages.object_store import ObjectStore
+
+    cache, key = f"s3://{bucket}/c", "ab" + "0" * 30
+    both_written = threading.Barrier(2)
+    commit = ObjectStore._commit
+
+    def commit_after_both(self, k, manifest):
+        both_written.wait(timeout=30)
+        return commit(self, k, manifest)
+
+    monkeypatch.setattr(ObjectStore, "_commit", commit_after_both)
+    value = {"x": np.arange(12.0).reshape(3, 4), "n": 3}
+    stored = []
+    threads = [threading.Thread(target=lambda: stored.append(Store(cache).put(key, value))) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert len(stored) == 2 and stored[0]["location"] == stored[1]["location"]  # both report the same entry
+    writers = s3fs_client.ls(f"{cache}/objects/ab/{key}", detail=False)
+    assert [w.rsplit("/", 1)[-1] for w in writers] == [stored[0]["location"]]  # the loser's data is gone
+    store = Store(cache)
+    assert store.has(key)
+    got = store.get(key)
+    np.testing.assert_array_equal(got["x"], value["x"])
+    assert got["n"] == 3
+
+
+def test_a_result_with_other_content_replaces_the_stored_one(s3_endpoint, bucket, tmp_path, monkeypatch):
+    """A result stored without some failed items is replaced when they are retried and it is computed again
+    (same key, other content); a second write of the same content keeps the first copy."""
+    monkeypatch.setenv("STAGES_LOCAL_CACHE", str(tmp_path / "local"))
+    store, key = Store(f"s3://{bucket}/c"), "cd" + "1" * 30
+    partial = store.put(key, {"x": np.zeros(2)}, info={"left_out": [["k", "feat", "s001", "failed"]]})
+    assert store.put(key, {"x": np.zeros(2)}, info={"left_out": [["k", "feat", "s001", "failed"]]})["location"] \
+        == partial["location"]
+    full = store.put(key, {"x": np.ones(3)}, info={"left_out": []})
+    assert full["location"] != partial["location"] and store.left_out(key) == []
+    np.testing.assert_array_equal(store.get(key)["x"], np.ones(3))
+
+
+RACE_YAML = SYNTHETIC_YAML.replace("""  dist:
+    function: synthetic.pair_distances
+    pairs: feat""", """  met:
+    function: race.meet
+    foreach: feat
+    inputs: {features: feat}
+    params: {folder: "${meet_folder}"}
+  dist:
+    function: synthetic.pair_distances
+    pairs: met""").replace("  work: 0\n", "  work: 0\n  meet_folder: meet\n")
+
+
+def _cli(args: list[str], cwd, endpoint_env: dict, local: str) -> subprocess.Popen:
+    env = {**os.environ, **plugins_env("tests.stages.race_plugin"), **endpoint_env, "STAGES_LOCAL_CACHE": local}
+    return subprocess.Popen([sys.executable, "-m", "stages", *args], cwd=cwd, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def _writers(fs, store, key: str) -> list[str]:
+    try:
+        return fs.ls(store.object_path(key), detail=False)
+    except FileNotFoundError:  # an entry without arrays or files is its manifest alone
+        return []
+
+
+def test_two_concurrent_runs_into_one_bucket(tmp_path, bucket, s3_endpoint, s3fs_client, monkeypatch):
+    """Two runs, as if on two machines (each its own local folder), compute every entry of stage ``met`` at
+    the same moment (race.meet waits for both) and store it into one bucket: both succeed, each entry is kept
+    once, complete, and both give identical results."""
+    monkeypatch.chdir(tmp_path)
+    path = make_project(tmp_path, n=6, yaml_text=RACE_YAML)
+    cache = f"s3://{bucket}/cache"
+    procs = [_cli(["run", str(path), "--cache", cache, "--quiet", "--workers", "0", "--out", str(tmp_path / f"out{i}"),
+                   "--summary-json", str(tmp_path / f"s{i}.json")], tmp_path, s3_endpoint, str(tmp_path / f"local{i}"))
+             for i in range(2)]
+    outs = [p.communicate(timeout=300) for p in procs]
+    for p, (_, err) in zip(procs, outs):
+        assert p.returncode == 0, err
+    runs = [json.loads((tmp_path / f"s{i}.json").read_text())["stages"] for i in range(2)]
+    assert [r["met"]["executed"] for r in runs] == [6, 6]  # both computed (and tried to store) every entry
+    m0, m1 = (json.loads((tmp_path / f"out{i}" / "metrics.json").read_text()) for i in range(2))
+    assert m0 == m1
+    assert ((tmp_path / "out0" / "rep" / "summary.txt").read_bytes()
+            == (tmp_path / "out1" / "rep" / "summary.txt").read_bytes())
+    from stages import registry
+    registry.load_plugin("tests.stages.race_plugin")  # to plan it here too
+    store = Store(cache)
+    plan = api.plan_pipeline(str(path), cache_dir=cache, quiet=True)
+    for t in plan.tasks():  # every entry complete, and exactly one writer's data kept for it
+        assert store.has(t.key)
+        store.get(t.key)
+        assert len(_writers(s3fs_client, store, t.key)) <= 1
+    for t in plan.stages["met"].tasks:
+        assert [w.rsplit("/", 1)[-1] for w in _writers(s3fs_client, store, t.key)] == [store.manifest(t.key)["location"]]
+
+
+def test_gc_on_s3(project, tmp_path, s3fs_client, monkeypatch):
+    import stages.object_store as object_store
+
+    path, cache = project
+    run_quiet(path, cache_dir=cache)
+    run_quiet(path, cache_dir=cache, overrides=["sigma=2.0"])      # two more entries (summary, rep)
+    store = Store(cache)
+    key = _feat_key(path, cache)
+    old_writer = store.manifest(key)["location"]
+    store.invalidate(key)
+    run_quiet(path, cache_dir=cache)                                 # recomputed: the old data is stale now
+    foreign = f"{cache}/objects/notes.txt"
+    s3fs_client.pipe_file(foreign, b"mine")                          # not the engine's: never removed
+    n_before = len(store.all_keys())
+
+    dry = api.gc([str(path)], cache, dry=True)
+    assert dry["removed"] == 2 and len(store.all_keys()) == n_before  # a dry run removes nothing
+    monkeypatch.setattr(object_store, "STALE_WRITE_S", 0.0)
+    res = api.gc([str(path)], cache)
+    assert res["removed"] == 2 and res["kept"] == n_before - 2 and res["bytes_freed"] > 0
+    assert not s3fs_client.exists(f"{store.object_path(key)}/{old_writer}")
+    assert s3fs_client.exists(f"{store.object_path(key)}/{store.manifest(key)['location']}")
+    assert s3fs_client.cat_file(foreign) == b"mine"
+    assert set(executed(run_quiet(path, cache_dir=cache)).values()) == {0}  # what is reachable is kept
+
+    s3fs_client.rm_file(f"{cache}/.stages-cache")
+    with pytest.raises(UserError, match="marker"):
+        api.gc([str(path)], cache)
+    assert len(store.all_keys()) == n_before - 2
+
+
+def test_a_prefix_with_other_content_is_refused(project, bucket, s3fs_client):
+    path, _ = project
+    s3fs_client.pipe_file(f"{bucket}/holiday.jpg", b"not a cache")
+    with pytest.raises(UserError, match="not a stages cache"):
+        run_quiet(path, cache_dir=f"s3://{bucket}")
+    assert s3fs_client.ls(bucket, detail=False) == [f"{bucket}/holiday.jpg"]  # nothing written there
+
+
+def test_a_missing_bucket_or_backend_is_a_clear_error(project, monkeypatch):
+    path, _ = project
+    with pytest.raises(UserError, match="does not exist"):
+        run_quiet(path, cache_dir="s3://no-such-bucket-" + uuid.uuid4().hex[:8] + "/c")
+    import fsspec
+
+    def no_backend(protocol, **kw):
+        raise ImportError("Install s3fs to access S3")
+
+    monkeypatch.setattr(fsspec, "filesystem", no_backend)
+    with pytest.raises(UserError) as err:
+        api.status(str(path), cache_dir="s3://x/c")
+    assert "s3fs" in str(err.value) and ".[s3]" in err.value.fix
