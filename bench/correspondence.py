@@ -17,7 +17,9 @@ Measures (target surface, heat-method geodesics, / sqrt(target area)): dense mea
 farthest-point template vertices, fraction within 0.05 / 0.10 / 0.25, landmark accuracy (a transferred landmark is
 right when its nearest true landmark has its name), landmark transfer error, seconds per pair. CPU seconds (time.process_time) per pair
 includes the target's own per-mesh work (eigenpairs etc.); the template's is done once for every method
-(pyFM: its template TriMesh is processed once and reused) and reported separately.
+(pyFM: its template TriMesh is processed once and reused) and reported separately. Every method runs on one
+BLAS/OpenMP thread (set at import), so the seconds count work, and the summary prints each project method's
+seconds over each pyFM mode's (issue 10's target: <= 1/3).
 
 Run:  python bench/correspondence.py [--pairs N] [--methods pyfm_none,pyfm_5pts,dense_sparse,dense_auto] [--json OUT]
       python bench/correspondence.py --summarize OUT.json   (the table of a saved, possibly partial, run)
@@ -31,7 +33,14 @@ import os
 import sys
 import time
 
-import numpy as np
+# One BLAS/OpenMP thread for every method, set before numpy is imported when run as a script: CPU seconds
+# (process_time) then count the work, not idle threads spinning on a shared machine (main() also caps an
+# already loaded BLAS; importing this module leaves the environment alone).
+if __name__ == "__main__":
+    for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[_var] = "1"
+
+import numpy as np  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
@@ -77,7 +86,26 @@ def print_summary(rows: list, methods: list, template_seconds: dict, n_eval: int
     for m, s in summary.items():
         print(f"{m:<14}{s['landmark_accuracy']:>8.4f}{s['mean_error']:>10.4f}{s['within_0.05']:>8.3f}"
               f"{s['within_0.10']:>8.3f}{s['within_0.25']:>8.3f}{s['landmark_error']:>8.4f}{s['seconds']:>8.1f}")
+    for line in time_ratio_lines(summary):
+        print(line)
     return summary
+
+
+def time_ratios(summary: dict) -> dict:
+    """{(project method, pyFM mode): project CPU seconds / pyFM CPU seconds per pair} (issue 10: <= 1/3)."""
+    ours = [m for m in summary if not m.startswith("pyfm")]
+    peers = [m for m in summary if m.startswith("pyfm")]
+    return {(m, p): summary[m]["seconds"] / summary[p]["seconds"] for m in ours for p in peers
+            if summary[p]["seconds"] > 0}
+
+
+def time_ratio_lines(summary: dict) -> list[str]:
+    """The CPU-time ratios of ``time_ratios`` as printable lines (none without both kinds of method)."""
+    ratios = time_ratios(summary)
+    if not ratios:
+        return []
+    return ["CPU time per pair, project / pyFM (target <= 0.333):"] + [
+        f"  {m} / {p}: {r:.3f}{'' if r <= 1 / 3 else '  (above 1/3)'}" for (m, p), r in ratios.items()]
 
 
 def summarize(path: str) -> int:
@@ -95,6 +123,16 @@ def summarize(path: str) -> int:
     return 0
 
 
+def _limit_threads() -> None:
+    """Cap BLAS/OpenMP pools at one thread even when numpy was loaded before this module (threadpoolctl, when
+    installed; the environment variables set at import cover the normal ``python bench/correspondence.py``)."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return
+    threadpool_limits(1)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data", default=DEFAULT_DATA, help="course scape/ folder")
@@ -106,6 +144,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.summarize:
         return summarize(args.summarize)
+    _limit_threads()
 
     from corr_core.correspondence.dense import basis as dense_basis
     from corr_core.correspondence.dense import dense_map, measures

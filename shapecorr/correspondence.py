@@ -25,7 +25,7 @@ from corr_core.geometry.repair import repair_mesh, warn_repairs
 from stages.registry import register
 
 from .dense import dense_reports
-from .landmark_sources import _landmarks, _no_landmarks, _sparse_index, mesh_landmarks
+from .landmark_sources import mesh_landmarks, no_landmarks_result, sparse_positions
 
 
 @register("corr.mesh", group="correspondence", fanout="item")
@@ -59,7 +59,7 @@ def spectral(mesh, landmarks, landmark_files=None, template_mesh=None, *, k: int
     """
     ids, source = mesh_landmarks(mesh, landmarks, landmark_files, template_mesh)
     if ids is None:
-        return _no_landmarks(mesh, source)
+        return no_landmarks_result(mesh, source)
     out = mesh_features.spectral_features(mesh["V"], mesh["F"], ids, k=k, n_times=n_times, n_energies=n_energies,
                                           wks_variance=wks_variance)
     return {**out, "n_vertices": len(mesh["V"]), "landmark_source": source}  # matchers: does the truth apply
@@ -73,7 +73,7 @@ def geodesics(mesh, landmarks, landmark_files=None, template_mesh=None) -> dict:
     """
     ids, source = mesh_landmarks(mesh, landmarks, landmark_files, template_mesh)
     if ids is None:
-        return _no_landmarks(mesh, source)
+        return no_landmarks_result(mesh, source)
     return {**mesh_features.geodesic_features(mesh["V"], mesh["F"], ids), "n_vertices": len(mesh["V"]),
             "landmark_source": source}
 
@@ -119,7 +119,7 @@ def flatten(mesh, path, landmarks, flattened=None, samples=None, landmark_files=
         sample_vids, _ = read_landmarks(samples, n_vertices=len(V))
     ids, landmark_source = mesh_landmarks(mesh, landmarks, landmark_files, template_mesh)
     if ids is None:
-        return _no_landmarks(mesh, landmark_source)
+        return no_landmarks_result(mesh, landmark_source)
     out = mesh_features.flattening_features(V, F, ids, Z=given, sample_vids=sample_vids, n_samples=n_samples)
     return {**out, "area": float(mesh["area"]), "source": "computed" if given is None else "given",
             "sample_source": "fps" if sample_vids is None else "given", "landmark_source": landmark_source}
@@ -147,7 +147,7 @@ def match_descriptor(template, target, landmarks, sparse_landmarks, *, descripto
     """
     if _skipped_match(target):
         return _skipped_match(target)
-    out = matchers.match_descriptors(template, target, _sparse_index(landmarks, sparse_landmarks),
+    out = matchers.match_descriptors(template, target, sparse_positions(landmarks, sparse_landmarks),
                                      descriptor=descriptor, metric=metric)
     return _mark_truth(out, template.get("n_vertices"), target.get("n_vertices"),
                        target.get("landmark_source") == "own")
@@ -163,7 +163,7 @@ def match_mrf(template, target, landmarks, sparse_landmarks, *, sigma: float = 0
     """
     if _skipped_match(target):
         return _skipped_match(target)
-    out = matchers.match_geodesic_mrf(template, target, _sparse_index(landmarks, sparse_landmarks), sigma=sigma,
+    out = matchers.match_geodesic_mrf(template, target, sparse_positions(landmarks, sparse_landmarks), sigma=sigma,
                                       orientation_test=orientation)
     return _mark_truth(out, template.get("n_vertices"), target.get("n_vertices"),
                        target.get("landmark_source") == "own")
@@ -186,7 +186,7 @@ def match_mobius(template, target, template_mesh, target_mesh, landmarks, sparse
     if _skipped_match(target):
         return _skipped_match(target)
     out = matchers.match_mobius(template, target, template_mesh, target_mesh,
-                                _sparse_index(landmarks, sparse_landmarks), K=K, metric=metric, K_scale=K_scale,
+                                sparse_positions(landmarks, sparse_landmarks), K=K, metric=metric, K_scale=K_scale,
                                 power=power, top=top, dense_points=dense_points)
     return _mark_truth(out, len(template_mesh["V"]), len(target_mesh["V"]), target.get("landmark_source") == "own")
 
@@ -247,10 +247,12 @@ def _method_reports(inputs: dict, names: list[str], sparse_names: list[str]) -> 
 
 @register("corr.evaluate", group="correspondence", fanout="once", writes_files=True)
 def evaluate(landmarks, sparse_landmarks, descriptor=None, mrf=None, mrf_oriented=None, mobius_votes=None,
-             dense_sparse=None, dense_auto=None, dense_measures=None, *, out_dir: str) -> dict:
+             dense_sparse=None, dense_auto=None, dense_measures=None, *, frequency_figures: bool = True,
+             out_dir: str) -> dict:
     """Accuracy per method (correct / all over test meshes x landmarks), per-mesh binary correspondence
-    matrices (correspondences.json), accumulated frequency matrices as figures with landmark names, and the
-    dense-map geodesic error curve.
+    matrices (correspondences.json), accumulated frequency matrices as figures with landmark names
+    (``frequency_<method>.png``, about 0.5 s each; ``frequency_figures: false`` skips them, e.g. in sweeps and
+    tests), and the dense-map geodesic error curve.
 
     Each course method input is {test mesh: {"all": (L,), "sparse": (k,)}}; the truth is landmark i ->
     landmark i (the template's and the test's landmark files list the same anatomical points in the same order).
@@ -258,15 +260,15 @@ def evaluate(landmarks, sparse_landmarks, descriptor=None, mrf=None, mrf_oriente
     dense_measures {test mesh: corr.dense_measures result}; their landmark accuracy counts a placed landmark as
     right when its nearest true landmark has its name ("dense", "landmark_error": ``dense_reports``).
     """
-    _, names = _landmarks(landmarks)
-    sparse_names = [names[i] for i in _sparse_index(landmarks, sparse_landmarks)]
+    _, names = read_landmarks(landmarks)
+    sparse_names = [names[i] for i in sparse_positions(landmarks, sparse_landmarks)]
     inputs = {"descriptor": descriptor, "mrf": mrf, "mrf_oriented": mrf_oriented, "mobius_votes": mobius_votes}
     inputs, not_scored = _drop_unscorable(inputs)
     reports = _method_reports(inputs, names, sparse_names)
     dense_method_reports, dense_out = dense_reports(names, dense_sparse, dense_auto, dense_measures, out_dir)
     reports.update(dense_method_reports)
     sparse_rows = {label for label, _, key in _REPORTS if key == "sparse"}
-    for label, report in reports.items():
+    for label, report in reports.items() if frequency_figures else ():
         _write_frequency_figure(label, report, sparse_names if label in sparse_rows else names, out_dir)
     with open(os.path.join(out_dir, "correspondences.json"), "w", encoding="utf-8") as fh:
         json.dump({"landmarks": names, "sparse_landmarks": sparse_names,

@@ -24,14 +24,14 @@ from corr_core import plotting
 from corr_core.correspondence import dense, measures
 from corr_core.correspondence.dense import measures as dense_measures_lib
 from corr_core.correspondence.dense.basis import MeshBasis, map_to_original
-from corr_core.correspondence.landmarks import read_landmarks
+from corr_core.correspondence.landmarks import read_landmarks, write_landmarks
 from corr_core.geometry.intrinsic import IntrinsicMesh
 from corr_core.geometry.primitives import same_triangles
 from corr_core.geometry.sampling import farthest_point_samples
 
 from stages.registry import register
 
-from .landmark_sources import _sparse_index, mesh_landmarks
+from .landmark_sources import mesh_landmarks, sparse_positions
 
 METHODS = ("dense_sparse", "dense_auto")
 KIM_LABELS = {"mobius": "Möbius (best map)", "dense_sparse": "dense_sparse (5 points)",
@@ -68,26 +68,31 @@ def dense_init(template_basis, target_basis, template_mesh, target_mesh, landmar
     if target_ids is None:
         return {"skipped": f"{source} (dense_sparse needs the sparse landmarks on the target)"}
     template_ids, _ = mesh_landmarks(template_mesh, landmarks, landmark_files, template_mesh)
-    sparse = _sparse_index(landmarks, sparse_landmarks)
+    sparse = sparse_positions(landmarks, sparse_landmarks)
     C, p2p = dense.map_from_points(S, T, template_ids[sparse], target_ids[sparse], k_init=k_init, k_end=k_end)
     return {"C": C, "p2p_samples": p2p, "mode": mode}
 
 
 @register("corr.dense_refine", group="correspondence", fanout="item")
-def dense_refine(template_basis, target_basis, initial, *, refine: str = "extrinsic", n_patches: int = 300,
+def dense_refine(template_basis, target_basis, initial, *, refine: str = "extrinsic+spectral", n_patches: int = 300,
                  patch_size: int = 64, rounds: int = 5, icp_iterations: int = 6) -> dict:
     """The dense map: the initial map upsampled to every template vertex (``upsample_spectral``), then refined
-    (``refine``: "extrinsic" = patch-wise rigid ICP, "none"). Returns {"vertex_map": (n_template,) int target
-    vertex id (original ids; -1 off the template's kept component)} or {"skipped": why}."""
+    (``refine``: "extrinsic+spectral" = patch-wise rigid ICP then full-resolution ZoomOut, as ``dense_map``;
+    "extrinsic", "spectral", "none"). Returns {"vertex_map": (n_template,) int target vertex id (original ids;
+    -1 off the template's kept component)} or {"skipped": why}."""
     if "skipped" in initial:
         return {"skipped": initial["skipped"]}
-    if refine not in ("extrinsic", "none"):
-        raise ValueError(f"corr.dense_refine: refine must be 'extrinsic' or 'none', got {refine!r}")
+    steps = {"extrinsic+spectral": ("extrinsic", "spectral"), "extrinsic": ("extrinsic",), "spectral": ("spectral",),
+             "none": ()}
+    if refine not in steps:
+        raise ValueError(f"corr.dense_refine: refine must be one of {list(steps)}, got {refine!r}")
     S, T = _basis(template_basis, "template"), _basis(target_basis, "target")
     p2p = dense.upsample_spectral(S, T, np.asarray(initial["C"]), np.asarray(initial["p2p_samples"]))
-    if refine == "extrinsic":
+    if "extrinsic" in steps[refine]:
         p2p = dense.refine_extrinsic(S, T, p2p, n_patches=n_patches, patch_size=patch_size, rounds=rounds,
                                      icp_iterations=icp_iterations)
+    if "spectral" in steps[refine]:
+        p2p = dense.refine_spectral(S, T, p2p)
     return {"vertex_map": map_to_original(S, T, p2p)}
 
 
@@ -95,12 +100,6 @@ def _given_maps(inputs: dict) -> dict:
     """{method: {mesh: (n_template,) int}} of the dense results that have a map."""
     return {method: {m: np.asarray(r["vertex_map"], np.int64) for m, r in sorted((res or {}).items())
                      if "vertex_map" in r} for method, res in inputs.items() if res}
-
-
-def _write_landmarks(path: str, ids: np.ndarray, names: list[str]) -> None:
-    os.makedirs(os.path.dirname(path), exist_ok=True)
-    with open(path, "w", encoding="utf-8") as fh:
-        fh.write("".join(f"{int(v)},{n}\n" for v, n in zip(ids, names)))
 
 
 @register("corr.place_landmarks", group="correspondence", fanout="once", writes_files=True)
@@ -116,7 +115,7 @@ def place_landmarks(template_mesh, landmarks, dense_sparse=None, dense_auto=None
         placed[method] = {m: dense.transfer_landmarks(vm, ids) for m, vm in maps.items()}
         for m, target_ids in placed[method].items():
             files.append(f"{method}/{m}.txt")
-            _write_landmarks(os.path.join(out_dir, files[-1]), target_ids, names)
+            write_landmarks(os.path.join(out_dir, files[-1]), target_ids, names)
     return {"placed": placed, "names": list(names), "files": files}
 
 

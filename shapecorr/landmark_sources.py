@@ -16,7 +16,7 @@ def _landmarks(path: str, n_vertices: int | None = None) -> tuple[np.ndarray, li
     return np.asarray(ids, dtype=np.int64), list(names)
 
 
-def _sparse_index(all_path: str, sparse_path: str, n_vertices: int | None = None) -> np.ndarray:
+def sparse_positions(all_path: str, sparse_path: str, n_vertices: int | None = None) -> np.ndarray:
     """Positions of the sparse landmarks within the full landmark list: (k,) int."""
     ids, _ = _landmarks(all_path, n_vertices)
     sids, _ = _landmarks(sparse_path, n_vertices)
@@ -77,6 +77,6 @@ def mesh_landmarks(mesh: dict, landmarks: str, landmark_files=None, template_mes
                   f"landmarks/{stem}.txt is not given; the methods that need landmarks on it skip it")
 
 
-def _no_landmarks(mesh: dict, why: str) -> dict:
+def no_landmarks_result(mesh: dict, why: str) -> dict:
     """The result of a per-mesh landmark stage for a mesh without landmarks (the matchers skip it)."""
     return {"no_landmarks": why, "n_vertices": len(mesh["V"])}

@@ -1,4 +1,4 @@
-"""Reading landmark vertex-id files (``vid,Name`` lines or bare ids), with 1-based file detection."""
+"""Reading and writing landmark vertex-id files (``vid,Name`` lines or bare ids), with 1-based file detection."""
 from __future__ import annotations
 
 import os
@@ -78,6 +78,40 @@ def read_landmarks(path: str | os.PathLike, n_vertices: int | None = None) -> tu
             raise ValueError(f"{path}:{line_nos[i]}: vertex id {ids[i]} is out of range 0..{n_vertices - 1}")
     out_names = [nm if nm is not None else str(int(v)) for nm, v in zip(names, arr)]
     return arr, out_names
+
+
+def format_landmarks(ids, names) -> str:
+    """The text of a landmark file: one ``vid,Name`` line per landmark, in the given order, newline-terminated.
+
+    Args:
+        ids: (k,) int 0-based vertex ids.
+        names: k names (no comma or newline: ``read_landmarks`` splits on the first comma of a line).
+    Returns:
+        The file text ("" for k = 0); ``read_landmarks`` reads it back to the same ids and names.
+    Raises:
+        ValueError: ids and names differ in length, an id is negative, or a name holds a comma or newline.
+    """
+    ids = [int(v) for v in np.asarray(ids).reshape(-1)]
+    names = [str(n) for n in names]
+    if len(ids) != len(names):
+        raise ValueError(f"format_landmarks: {len(ids)} vertex ids but {len(names)} names; give one name per id")
+    for vid, name in zip(ids, names):
+        if vid < 0:
+            raise ValueError(f"format_landmarks: negative vertex id {vid} (landmark {name!r})")
+        if "," in name or "\n" in name or "\r" in name or name != name.strip() or not name:
+            raise ValueError(f"format_landmarks: landmark name {name!r} (vertex {vid}) must be non-empty, "
+                             "without commas, newlines or surrounding spaces")
+    return "".join(f"{vid},{name}\n" for vid, name in zip(ids, names))
+
+
+def write_landmarks(path: str | os.PathLike, ids, names) -> None:
+    """Write ``format_landmarks(ids, names)`` to ``path`` (UTF-8), creating its parent folder if needed."""
+    text = format_landmarks(ids, names)
+    folder = os.path.dirname(os.fspath(path))
+    if folder:
+        os.makedirs(folder, exist_ok=True)
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write(text)
 
 
 def subset_positions(ids: np.ndarray, subset_ids: np.ndarray, subset_name: str = "subset",

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
+from corr_core.correspondence.landmarks import format_landmarks, write_landmarks
 from corr_core.geometry.mesh_io import save_obj
 from corr_core.geometry.primitives import largest_component, vertex_adjacency, vertex_normals
 
@@ -171,7 +172,10 @@ def _relax(V: np.ndarray, F: np.ndarray, iters: int = 6, step: float = 0.5) -> n
     return V
 
 
-def make_humanoid_rest(grid_step: float = 0.0225) -> tuple[np.ndarray, np.ndarray]:
+DEFAULT_GRID_STEP = 0.0225  # metres: about 4-5 thousand vertices
+
+
+def make_humanoid_rest(grid_step: float = DEFAULT_GRID_STEP) -> tuple[np.ndarray, np.ndarray]:
     """The rest-pose surface mesh. Returns V: (n,3) float metres, F: (m,3) int, outward oriented, closed.
 
     Exactly left/right symmetric by construction: the x >= 0 half is meshed (marching cubes), its midplane cap is cut
@@ -446,16 +450,18 @@ def landmark_vertices(V: np.ndarray) -> dict[str, int]:
     return {name: int(np.argmin(np.linalg.norm(V - p, axis=1))) for name, p in landmark_targets().items()}
 
 
-def make_humanoid_dataset(n_poses: int = 6, seed: int = 0, vary_bodies: bool = False):
+def make_humanoid_dataset(n_poses: int = 6, seed: int = 0, vary_bodies: bool = False,
+                          grid_step: float = DEFAULT_GRID_STEP):
     """Rest mesh, posed meshes and landmarks, in memory.
 
     vary_bodies: each posed mesh is also a different person (``random_body`` from
     ``np.random.default_rng([seed, 1])``, so the poses are those of ``vary_bodies=False``); the rest mesh stays
     the rest body. Same vertices and faces either way.
+    grid_step: resolution of ``make_humanoid_rest`` (metres; the default gives 4691 vertices, 0.03 about 2,600).
     Returns: (V_rest (n,3), F (m,3), poses list of (n,3) arrays, pose parameters list of dicts,
     landmarks dict name -> vertex id, bodies list of dicts (all 1.0 without ``vary_bodies``)).
     """
-    V, F = make_humanoid_rest()
+    V, F = make_humanoid_rest(grid_step)
     W, _ = skinning_weights(V, F)
     rng = np.random.default_rng(seed)
     params = [random_pose(rng) for _ in range(n_poses)]
@@ -526,7 +532,7 @@ def remesh(V: np.ndarray, F: np.ndarray, kind: str, seed: int = 0) -> tuple[np.n
 
 
 def write_humanoid_dataset(out_dir: str | os.PathLike, n_poses: int = 6, seed: int = 0, vary_bodies: bool = False,
-                           remeshed: tuple[str, ...] | list[str] = ()) -> dict:
+                           remeshed: tuple[str, ...] | list[str] = (), grid_step: float = DEFAULT_GRID_STEP) -> dict:
     """Write the course layout: ``meshes/template/mesh000.obj`` (rest pose), ``meshes/test/meshNNN.obj``
     (NNN = 001..n_poses, random poses drawn from ``np.random.default_rng(seed)``), ``landmark_vids.txt`` and
     ``sparse_landmark_vids.txt`` (``vid,Name`` lines, 0-based). All meshes share faces; vertex i matches vertex i.
@@ -535,6 +541,7 @@ def write_humanoid_dataset(out_dir: str | os.PathLike, n_poses: int = 6, seed: i
     remeshed: kinds (``REMESH_KINDS``); the k-th is written as ``meshes/test/mesh<n_poses+k>.obj``, pose k
     (1-based) re-triangulated by ``remesh`` (seed k), with its true map ``ground_truth/<mesh>.txt`` (one target
     vertex id per template vertex, a line each) and its landmarks ``landmarks/<mesh>.txt`` (``vid,Name``).
+    grid_step: mesh resolution (``make_humanoid_dataset``); coarser is cheaper to process (tests).
     Returns (JSON-serialisable): {"out_dir", "template", "tests": [paths], "landmarks": {name: vid},
     "sparse_landmarks": {name: vid}, "n_vertices", "n_faces", "poses": [dict of joint angles in degrees],
     "bodies": [dict of body factors], "remeshed": {mesh: {"kind", "n_vertices"}}}.
@@ -542,7 +549,8 @@ def write_humanoid_dataset(out_dir: str | os.PathLike, n_poses: int = 6, seed: i
     out = Path(out_dir)
     (out / "meshes" / "template").mkdir(parents=True, exist_ok=True)
     (out / "meshes" / "test").mkdir(parents=True, exist_ok=True)
-    V, F, posed, params, lms, bodies = make_humanoid_dataset(n_poses, seed, vary_bodies=vary_bodies)
+    V, F, posed, params, lms, bodies = make_humanoid_dataset(n_poses, seed, vary_bodies=vary_bodies,
+                                                             grid_step=grid_step)
     if len(remeshed) > n_poses:
         raise ValueError(f"remeshed: {len(remeshed)} kinds but only {n_poses} poses to remesh")
     template = out / "meshes" / "template" / "mesh000.obj"
@@ -558,14 +566,14 @@ def write_humanoid_dataset(out_dir: str | os.PathLike, n_poses: int = 6, seed: i
         V2, F2, truth = remesh(posed[k - 1], F, kind, seed=k)
         save_obj(out / "meshes" / "test" / f"{name}.obj", V2, F2)
         for sub, text in (("ground_truth", "".join(f"{t}\n" for t in truth)),
-                          ("landmarks", "".join(f"{truth[lms[n]]},{n}\n" for n in LANDMARK_NAMES))):
+                          ("landmarks", format_landmarks([truth[lms[n]] for n in LANDMARK_NAMES], LANDMARK_NAMES))):
             (out / sub).mkdir(exist_ok=True)
             (out / sub / f"{name}.txt").write_text(text)
         tests.append(str(out / "meshes" / "test" / f"{name}.obj"))
         remeshed_info[name] = {"kind": kind, "n_vertices": int(len(V2))}
-    (out / "landmark_vids.txt").write_text("".join(f"{lms[n]},{n}\n" for n in LANDMARK_NAMES))
+    write_landmarks(out / "landmark_vids.txt", [lms[n] for n in LANDMARK_NAMES], LANDMARK_NAMES)
     sparse = {n: lms[n] for n in SPARSE_LANDMARK_NAMES}
-    (out / "sparse_landmark_vids.txt").write_text("".join(f"{v},{n}\n" for n, v in sparse.items()))
+    write_landmarks(out / "sparse_landmark_vids.txt", list(sparse.values()), list(sparse))
     return {"out_dir": str(out), "template": str(template), "tests": tests, "landmarks": lms,
             "sparse_landmarks": sparse, "n_vertices": int(len(V)), "n_faces": int(len(F)),
             "poses": [{k: float(v) for k, v in p.items()} for p in params], "bodies": bodies,

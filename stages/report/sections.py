@@ -34,6 +34,15 @@ def _run_line(ctx: ReportContext) -> str:
     return '<p class="runline">' + " &middot; ".join(parts) + "</p>"
 
 
+def _cache_rows(store) -> list[list[str]]:
+    """The run-details rows naming the cache: where the entries live as the user gave it (a folder, or the URL of
+    an object store), and for an object store also its local folder (temporary files, run records)."""
+    rows = [["cache", store.location]]
+    if store.location != store.root:
+        rows.append(["cache local folder", store.root])
+    return rows
+
+
 def _short_number(v) -> str:
     """A summary cell: 3 significant digits (the full values are in the metrics details)."""
     return f"{v:.3g}" if isinstance(v, float) else format_value(v)
@@ -71,7 +80,7 @@ def summary_section(ctx: ReportContext) -> str:
     cmd = f"python -m stages run {ctx.pipeline_arg}" + "".join(f" --set {o}" for o in ctx.overrides)
     if ctx.nothing_run:
         parts.append(f'<p class="note"><b>Nothing has been run yet</b> for this configuration: no result is in '
-                     f"the cache <code>{esc(plan.store.root)}</code>. Run <code>{esc(cmd)}</code> and then "
+                     f"the cache <code>{esc(plan.store.location)}</code>. Run <code>{esc(cmd)}</code> and then "
                      f"<code>python -m stages report {esc(ctx.pipeline_arg)}</code> again.</p>")
     elif ctx.incomplete:
         parts.append(f'<p class="note">Not every task of this configuration is in the cache '
@@ -97,7 +106,7 @@ def summary_section(ctx: ReportContext) -> str:
     parts += [_headline_block(ctx, t) for t in ctx.headlines]
     rows = [["pipeline", plan.pipeline.name], ["file", plan.pipeline.file],
             ["overrides", " ".join(ctx.overrides) or "(none)"], ["output folder", plan.pipeline.output_dir],
-            ["cache", plan.store.root], ["results in cache", f"{ctx.stored} of {ctx.total} tasks"]]
+            *_cache_rows(plan.store), ["results in cache", f"{ctx.stored} of {ctx.total} tasks"]]
     if record:
         summ = record.get("summary") or {}
         rows += [["last run", when(record.get("time"))], ["last run wall time (s)", summ.get("wall_seconds", "?")]]

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from corr_core.generate.humanoid import write_humanoid_dataset
-from corr_core.correspondence.landmarks import read_landmarks
+from corr_core.correspondence.landmarks import read_landmarks, write_landmarks
 from corr_core.geometry.checks import check_correspondence_mesh
 from corr_core.geometry.mesh_io import load_mesh, save_obj
 from shapecorr.correspondence import mesh as corr_mesh
@@ -337,8 +337,8 @@ def _loose_piece_and_unused_vertices(V, F):
 
 
 def _remap_landmark_file(path: Path, new_id: np.ndarray) -> None:
-    lines = [ln.split(",", 1) for ln in path.read_text().splitlines() if ln.strip()]
-    path.write_text("".join(f"{new_id[int(v)]},{name}\n" for v, name in lines))
+    ids, names = read_landmarks(path)
+    write_landmarks(path, new_id[ids], names)
 
 
 def _dirty_copy(tmp_path, humanoid) -> tuple[Path, np.ndarray]:

@@ -2,7 +2,8 @@
 course's, a target with other connectivity (decimated pose, true map known by construction), the user's case
 "two meshes and only the template's landmarks", and a refinement change that reruns only what depends on it.
 
-All tests share one cache (module fixture) and coarse spectral settings (the meshes are small).
+All tests share one cache and one first run (module fixtures), coarse spectral settings and coarse meshes
+(``grid_step`` 0.03: about 2,600 vertices instead of 4,691), so the module stays cheap.
 """
 from __future__ import annotations
 
@@ -22,12 +23,15 @@ from stages import api
 from tests.helpers import ROOT
 
 SCAPE = ROOT / "pipelines" / "scape.yaml"
-# the default pipeline's settings (pipeline.yaml); at k = 40 dense_auto picks the mirror map on the decimated pose
+GRID_STEP = 0.03       # metres: coarser generated meshes than the default 0.0225
+N_POINTS = 300         # dense errors at this many farthest-point template vertices per test mesh
+# the default pipeline's settings (pipeline.yaml; at k = 40 dense_auto picks the mirror map on the decimated pose),
+# fewer evaluation points and no frequency figures (the course methods' figures: tests/pipelines/test_correspondence_*)
 COARSE = ["dense_basis.k=60", "dense_basis.n_samples=1000", "dense_sparse_init.k_init=30",
           "dense_sparse_init.k_end=60", "dense_auto_init.k_init=30", "dense_auto_init.k_end=60",
-          "dense_sparse.n_patches=150", "dense_auto.n_patches=150", "dense_measures.n_points=600",
-          "spectral.k=40", "flatten.n_samples=150", "mobius.dense_points=20"]
-# floors on these meshes (measured: mean error ~0.02, every point within 0.25, every landmark right)
+          "dense_sparse.n_patches=150", "dense_auto.n_patches=150", f"dense_measures.n_points={N_POINTS}",
+          "spectral.k=40", "flatten.n_samples=150", "mobius.dense_points=20", "evaluate.frequency_figures=false"]
+# floors on these meshes (measured: mean error ~0.01, every point within 0.25, every landmark right)
 MEAN_ERROR_CEILING = 0.04
 LANDMARK_ACCURACY_FLOOR = 0.9
 REFINE_DEPENDENTS = {"dense_auto", "dense_measures", "placed_landmarks", "evaluate", "dense_pictures"}
@@ -38,7 +42,7 @@ def data(tmp_path_factory):
     """mesh000 (template), mesh001 (a pose, same faces), mesh002 (pose 1 decimated, shuffled ids, with
     ground_truth/mesh002.txt and landmarks/mesh002.txt); one cache for the module."""
     tmp = tmp_path_factory.mktemp("dense")
-    info = write_humanoid_dataset(tmp / "humans", n_poses=1, seed=0, remeshed=["decimated"])
+    info = write_humanoid_dataset(tmp / "humans", n_poses=1, seed=0, remeshed=["decimated"], grid_step=GRID_STEP)
     return {"root": tmp / "humans", "cache": tmp / "cache", "info": info, "tmp": tmp}
 
 
@@ -52,11 +56,19 @@ def _metrics(data, root, out, sets=()):
                                          cache_dir=str(data["cache"]), output_dir=str(out), quiet=True))
 
 
-def test_both_dense_methods_beside_the_course_methods(data, tmp_path, dask_client):
-    s = _run(data, data["root"], tmp_path / "out", dask_client)
+@pytest.fixture(scope="module")
+def first_run(data, dask_client):
+    """The cold run of the whole pipeline on ``data``, shared by the tests that read it:
+    {"summary": run summary, "metrics": results, "out": output folder}."""
+    out = data["tmp"] / "out"
+    summary = _run(data, data["root"], out, dask_client)
+    return {"summary": summary, "metrics": _metrics(data, data["root"], out), "out": out}
+
+
+def test_both_dense_methods_beside_the_course_methods(first_run):
+    s, m = first_run["summary"], first_run["metrics"]
     assert not s["failures"]
     assert s["stages"]["dense_basis"]["tasks"] == 3            # once per mesh, shared by both methods
-    m = _metrics(data, data["root"], tmp_path / "out")
     for method in ("dense_sparse", "dense_auto"):
         assert set(m["dense"][method]) == {"mean_error", "within_0.05", "within_0.10", "within_0.25"}
         assert 0.0 <= m["dense"][method]["mean_error"] <= 1.0 and 0.0 <= m["accuracy"][method] <= 1.0
@@ -68,12 +80,20 @@ def test_both_dense_methods_beside_the_course_methods(data, tmp_path, dask_clien
     assert m["accuracy"]["dense_sparse"] >= LANDMARK_ACCURACY_FLOOR, m["accuracy"]
     assert {"descriptor", "mrf_oriented", "mobius_all"} <= set(m["accuracy"])
     # n_points farthest-point template vertices on each test mesh, Möbius measured at the same vertices
-    assert m["dense_n_points"] == {k: 2 * 600 for k in ("mobius", "dense_sparse", "dense_auto")}
-    out = tmp_path / "out"
+    assert m["dense_n_points"] == {k: 2 * N_POINTS for k in ("mobius", "dense_sparse", "dense_auto")}
+
+
+def test_kim_curves_and_pulled_back_pictures_are_published(first_run):
+    out = first_run["out"]
     assert (out / "evaluate" / "kim_curves.png").read_bytes()[:4] == b"\x89PNG"
+    assert not list((out / "evaluate").glob("frequency_*.png"))   # evaluate.frequency_figures=false
     for method in ("mobius", "dense_sparse", "dense_auto"):
         assert (out / "dense_pictures" / f"dense_{method}.png").is_file()
-    # placed landmarks: one file per method and test mesh, the template's names, close to the truth
+
+
+def test_placed_landmarks_have_the_template_names_and_land_near_the_truth(data, first_run):
+    """One file per method and test mesh, the template's names, close to the truth on the decimated pose."""
+    out, m = first_run["out"], first_run["metrics"]
     truth = np.loadtxt(data["root"] / "ground_truth" / "mesh002.txt", dtype=np.int64)
     ids, names = read_landmarks(data["root"] / "landmark_vids.txt")
     placed, placed_names = read_landmarks(out / "placed_landmarks" / "dense_sparse" / "mesh002.txt")
@@ -82,6 +102,9 @@ def test_both_dense_methods_beside_the_course_methods(data, tmp_path, dask_clien
     errors, nearest = dense_measures.landmark_errors(V, F, placed, truth[ids])
     assert dense_measures.landmark_accuracy(nearest) >= LANDMARK_ACCURACY_FLOOR
     assert m["accuracy_per_mesh"]["dense_sparse"]["mesh002"] == dense_measures.landmark_accuracy(nearest)
+    for method in ("dense_sparse", "dense_auto"):
+        for mesh in ("mesh001", "mesh002"):
+            assert (out / "placed_landmarks" / method / f"{mesh}.txt").is_file()
 
 
 def test_two_meshes_and_only_the_template_landmarks(data, tmp_path, dask_client):
@@ -110,9 +133,8 @@ def test_two_meshes_and_only_the_template_landmarks(data, tmp_path, dask_client)
     assert np.all(np.isfinite(errors))
 
 
-def test_refinement_params_rerun_only_the_refinement_and_the_evaluation(data, tmp_path, dask_client):
-    _run(data, data["root"], tmp_path / "out", dask_client)
-    s = _run(data, data["root"], tmp_path / "out", dask_client, ["dense_auto.rounds=2"])
+def test_refinement_params_rerun_only_the_refinement_and_the_evaluation(data, first_run, dask_client):
+    s = _run(data, data["root"], first_run["out"], dask_client, ["dense_auto.rounds=2"])
     executed = {name for name, st in s["stages"].items() if st["executed"]}
     assert executed == REFINE_DEPENDENTS
     assert s["stages"]["dense_auto"]["executed"] == 2 and s["stages"]["dense_basis"]["cached"] == 3

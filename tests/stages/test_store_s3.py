@@ -12,6 +12,7 @@ import subprocess
 import sys
 import threading
 import uuid
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -312,3 +313,17 @@ def test_a_missing_bucket_or_backend_is_a_clear_error(project, monkeypatch):
     with pytest.raises(UserError) as err:
         api.status(str(path), cache_dir="s3://x/c")
     assert "s3fs" in str(err.value) and ".[s3]" in err.value.fix
+
+
+def test_the_report_names_the_cache_url_and_its_local_folder(project, tmp_path):
+    """The report's run details show the cache as given (the s3:// URL), and the local folder beside it."""
+    import re
+
+    from stages.report import write_report
+
+    path, cache = project
+    run_quiet(path, cache_dir=cache)
+    html = Path(write_report(str(path), cache_dir=cache)).read_text()
+    rows = dict(re.findall(r"<tr><td>(cache[^<]*)</td><td>([^<]*)</td></tr>", html))
+    assert rows == {"cache": cache, "cache local folder": Store(cache).root}
+    assert str(tmp_path / "local") in rows["cache local folder"]

@@ -6,8 +6,9 @@ Steps (each callable on its own; see the modules):
      ``init.map_automatic`` (nothing given on the target: extremities + assignment search, orientation-aware);
      both end with ZoomOut (``zoomout``, adjoint point maps) from the template samples to every target vertex.
   3. ``refine.upsample_spectral`` (every template vertex), then pointwise steps below ZoomOut's floor:
-     ``refine.refine_extrinsic`` (patch-wise rigid ICP) then ``refine.refine_spectral`` (full-resolution ZoomOut
-     with local candidates) by default; ``refine.refine_geodesic`` on request.
+     ``refine.refine_extrinsic`` (patch-wise rigid ICP: robust patch fits, normal-compatible nearest vertices
+     anywhere on the target, so twisted or slid regions come back) then ``refine.refine_spectral``
+     (full-resolution ZoomOut with local candidates) by default; ``refine.refine_geodesic`` on request.
   4. ``transfer.transfer_landmarks``; ``measures`` evaluates maps where ground truth exists.
 ``dense_map`` runs them in order. Convention: template = source; a map is (n_template,) int target vertex ids.
 Ids: points given by the user are original vertex ids; maps between the steps are in the bases' local ids (the

@@ -70,23 +70,30 @@ def fit_functional_map(A_S: np.ndarray, A_T: np.ndarray, evals_S: np.ndarray, ev
     # unknown x = vec(C), column-major: x[i + ks * j] = C[i, j]
     # descriptor term ||C A_T - A_S||^2: H += (A_T A_T^T) kron I, b += vec(A_S A_T^T)
     d_scale = max(m * float(np.sum(A_S[1:] ** 2)) / ks / q, 1e-300)
-    H = w_descr / d_scale * np.kron(A_T @ A_T.T, np.eye(ks))
-    b = w_descr / d_scale * (A_S @ A_T.T).ravel(order="F")
     lap = (evals_T[None, :kt] - evals_S[:ks, None]) ** 2
     l_scale = max(m * float(lap.mean()), 1e-300)
+    if Om_S is None or Om_T is None or w_orient <= 0 or not len(Om_S):
+        # without the orientation term the rows of C decouple (as in pyFM): row i solves
+        # (w_d A_T A_T^T + w_l diag(lap[i])) c_i = w_d A_T A_S[i]^T, ks systems of size kt instead of one of ks * kt
+        G = w_descr / d_scale * (A_T @ A_T.T)
+        R = w_descr / d_scale * (A_S @ A_T.T)                 # (ks, kt): right-hand sides, one row per row of C
+        H_rows = np.repeat(G[None], ks, axis=0)
+        H_rows[:, np.arange(kt), np.arange(kt)] += w_lap / l_scale * lap + 1e-12
+        return np.linalg.solve(H_rows, R[:, :, None])[:, :, 0]
+    H = w_descr / d_scale * np.kron(A_T @ A_T.T, np.eye(ks))
+    b = w_descr / d_scale * (A_S @ A_T.T).ravel(order="F")
     H[np.diag_indices(n)] += w_lap / l_scale * lap.ravel(order="F")
-    if Om_S is not None and Om_T is not None and w_orient > 0 and len(Om_S):
-        # ||C P - Q C||^2 with P = Om_T (kt x kt), Q = Om_S (ks x ks); vec(C P) = (P^T kron I) x,
-        # vec(Q C) = (I kron Q) x; K = P^T kron I - I kron Q; K^T K summed over descriptors.
-        nq = len(Om_S)
-        o_scale = max(m / (ks * kt) * (kt * float(np.sum(Om_S**2)) + ks * float(np.sum(Om_T**2))) / nq, 1e-300)
-        PPt = np.einsum("qij,qkj->ik", Om_T, Om_T)             # sum P P^T (kt x kt)
-        QtQ = np.einsum("qji,qjk->ik", Om_S, Om_S)             # sum Q^T Q (ks x ks)
-        # (P^T kron I)^T (I kron Q) = P kron Q (its transpose is P^T kron Q^T), summed over descriptors
-        cross = (Om_T.reshape(nq, -1).T @ Om_S.reshape(nq, -1)).reshape(kt, kt, ks, ks)
-        cross = cross.transpose(0, 2, 1, 3).reshape(kt * ks, kt * ks)
-        KtK = np.kron(PPt, np.eye(ks)) + np.kron(np.eye(kt), QtQ) - cross - cross.T
-        H += w_orient / o_scale * KtK
+    # ||C P - Q C||^2 with P = Om_T (kt x kt), Q = Om_S (ks x ks); vec(C P) = (P^T kron I) x,
+    # vec(Q C) = (I kron Q) x; K = P^T kron I - I kron Q; K^T K summed over descriptors.
+    nq = len(Om_S)
+    o_scale = max(m / (ks * kt) * (kt * float(np.sum(Om_S**2)) + ks * float(np.sum(Om_T**2))) / nq, 1e-300)
+    PPt = np.einsum("qij,qkj->ik", Om_T, Om_T)             # sum P P^T (kt x kt)
+    QtQ = np.einsum("qji,qjk->ik", Om_S, Om_S)             # sum Q^T Q (ks x ks)
+    # (P^T kron I)^T (I kron Q) = P kron Q (its transpose is P^T kron Q^T), summed over descriptors
+    cross = (Om_T.reshape(nq, -1).T @ Om_S.reshape(nq, -1)).reshape(kt, kt, ks, ks)
+    cross = cross.transpose(0, 2, 1, 3).reshape(kt * ks, kt * ks)
+    KtK = np.kron(PPt, np.eye(ks)) + np.kron(np.eye(kt), QtQ) - cross - cross.T
+    H += w_orient / o_scale * KtK
     C = np.linalg.solve(H + 1e-12 * np.eye(n), b)
     return C.reshape((ks, kt), order="F")
 
@@ -98,22 +105,48 @@ def fmap_from_p2p(p2p: np.ndarray, Phi_S_rows: np.ndarray, Phi_T: np.ndarray) ->
         p2p: (r,) int target vertex of each given template row.
         Phi_S_rows: (r, k_s) template basis at those rows; Phi_T: (n_t, k_t) target basis.
     Returns: C: (k_s, k_t) with Phi_S_rows C ~ Phi_T[p2p].
+
+    Solved by the normal equations (Cholesky of the k_s x k_s Gram matrix: ~10x cheaper than an SVD) when they are
+    well conditioned -- eigenvectors at spread samples or at all vertices are nearly orthogonal columns
+    (condition number ~1.2 at the course meshes' 2000 samples, ~2 at all vertices) -- else by the SVD-based
+    ``numpy.linalg.lstsq`` (few rows, rank-deficient bases).
     """
-    return np.linalg.lstsq(Phi_S_rows, Phi_T[p2p], rcond=None)[0]
+    from scipy.linalg import LinAlgError, cho_factor, cho_solve
+
+    Phi_S_rows = np.asarray(Phi_S_rows, dtype=np.float64)
+    rhs = np.asarray(Phi_T, dtype=np.float64)[np.asarray(p2p)]
+    if len(Phi_S_rows) >= Phi_S_rows.shape[1]:
+        gram = Phi_S_rows.T @ Phi_S_rows
+        try:
+            factor = cho_factor(gram, lower=True, check_finite=False)
+            diag = np.abs(np.diag(factor[0]))
+            if diag.min() > 1e-4 * diag.max():                 # cond(gram) < 1e8: the normal equations are safe
+                return cho_solve(factor, Phi_S_rows.T @ rhs, check_finite=False)
+        except LinAlgError:
+            pass
+    return np.linalg.lstsq(Phi_S_rows, rhs, rcond=None)[0]
 
 
-def nearest_rows(queries: np.ndarray, points: np.ndarray, chunk: int = 4096) -> np.ndarray:
+def nearest_rows(queries: np.ndarray, points: np.ndarray, chunk: int = 256) -> np.ndarray:
     """Index of the nearest row of ``points`` (p, d) for each row of ``queries`` (q, d) -> (q,) int.
 
-    Brute force (exact, ties to the lowest index), chunked to bound memory; fast for d of tens to hundreds.
+    Brute force in float32 (``|x|^2 - 2 x.y`` by BLAS in blocks of ``chunk`` queries that stay in cache; ties
+    to the lowest index): exact up to float32 rounding of the distances (relative 1e-7, far below the gaps between
+    neighbouring vertices in a spectral embedding), deterministic, and about 2.5x faster than float64 on the
+    course meshes (2000 queries among 12,500 points in 100 dimensions).
     """
-    queries = np.ascontiguousarray(queries, dtype=np.float64)
-    points = np.ascontiguousarray(points, dtype=np.float64)
+    queries = np.ascontiguousarray(queries, dtype=np.float32)
+    points = np.ascontiguousarray(points, dtype=np.float32)
+    if queries.ndim != 2 or points.ndim != 2 or queries.shape[1] != points.shape[1] or len(points) == 0:
+        raise ValueError(f"nearest_rows: need (q, d) queries and (p >= 1, d) points, got {queries.shape} and "
+                         f"{points.shape}")
     sq = np.einsum("ij,ij->i", points, points)
     out = np.empty(len(queries), dtype=np.int64)
     for s in range(0, len(queries), chunk):
-        q = queries[s:s + chunk]
-        out[s:s + chunk] = np.argmin(sq[None, :] - 2.0 * q @ points.T, axis=1)
+        d = queries[s:s + chunk] @ points.T
+        d *= -2.0
+        d += sq[None, :]
+        out[s:s + chunk] = np.argmin(d, axis=1)
     return out
 
 
@@ -150,11 +183,19 @@ def chirality_functions(basis: MeshBasis, dist: np.ndarray) -> np.ndarray:
     N = face_normals(basis.V, basis.F)
     pairs = list(combinations(range(dist.shape[1]), 2))
     i, j = np.array(pairs).T
-    s = np.einsum("mc,mcp->mp", N, np.cross(G[:, :, i], G[:, :, j], axis=1))   # (m, P)
+    # <n, g_i x g_j> = g_j . (n x g_i): one cross product per field instead of one per pair
+    W = np.stack([N[:, 1:2] * G[:, 2] - N[:, 2:3] * G[:, 1], N[:, 2:3] * G[:, 0] - N[:, 0:1] * G[:, 2],
+                  N[:, 0:1] * G[:, 1] - N[:, 1:2] * G[:, 0]], axis=1)     # (m,3,L): n x g
+    s = np.einsum("mcp,mcp->mp", W[:, :, i], G[:, :, j])                  # (m, P)
+    return _face_to_vertex_mean(basis, s)
+
+
+def _face_to_vertex_mean(basis: MeshBasis, face_values: np.ndarray) -> np.ndarray:
+    """Area-weighted mean of face values (m, q) over the faces around each vertex -> (n, q) float."""
+    import scipy.sparse as sp
+
     A = face_areas(basis.V, basis.F)
-    out = np.zeros((basis.n, len(pairs)))
-    w = np.zeros(basis.n)
-    for c in range(3):
-        np.add.at(out, basis.F[:, c], A[:, None] * s)
-        np.add.at(w, basis.F[:, c], A)
-    return out / np.maximum(w, 1e-300)[:, None]
+    m = len(basis.F)
+    incidence = sp.csr_matrix((np.repeat(A, 3), (basis.F.ravel(), np.repeat(np.arange(m), 3))), shape=(basis.n, m))
+    w = np.asarray(incidence.sum(axis=1)).ravel()
+    return (incidence @ face_values) / np.maximum(w, 1e-300)[:, None]

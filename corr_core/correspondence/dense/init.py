@@ -8,12 +8,19 @@ commutativity, ``fmaps.fit_functional_map``; its orientation term is available b
 point-based descriptors it shrank the map and raised the error on SCAPE) is refined by ZoomOut.
 
 Automatic (``map_automatic``): feature points are detected on each mesh independently (``extremities``: local
-maxima of the average geodesic distance, i.e. hands, feet and head of a body), candidate assignments between the
-two sets are ranked by how well they preserve the geodesic distances between the points (which cannot tell
-left from right), and each of the best few is turned into a map by ``map_from_points``. Among the maps that keep
-the surface orientation (``orientation_agreement`` > 0: the map's local linear part has a positive determinant in
-right-handed tangent frames; a mirror map's is negative), the one under which the heat kernel signatures agree best wins (``hks_disagreement``: it
-tells front from back, i.e. rejects the orientation-preserving 180-degree turn).
+maxima of the average geodesic distance, i.e. hands, feet and head of a body). Assignments between the two sets
+are ranked by how well they preserve the geodesic distances between the points, after taking out a global scale
+(``ranked_assignments(scale_invariant=True)``: a bent or thinner body has shorter geodesics at the same area),
+and each of the best ``keep`` is turned into a coarse probe map by ``map_from_points`` (target distance fields
+rescaled likewise; ZoomOut to ``k_probe`` on ``n_probe`` samples). Distances cannot tell a map from its mirror,
+nor, on a body, the true map from the 180-degree turn (left<->right *and* front<->back) or from a twist (only the
+hands or only the feet swapped), so the probes are scored afterwards: ``chirality_agreement`` (the template's
+chirality functions vs the target's at the probe images: < 0 for a mirror map, a fraction for a twist) keeps the
+candidates above 2/3 of the best one's, and among those the map whose wave kernel signatures agree best wins
+(``wks_disagreement``, on the template's energy bands, scale-normalized: the front of a body differs from its
+back in the face, chest and feet). The winner goes on with ZoomOut to ``k_end``. ``orientation_agreement``
+(local linear fits) and ``hks_disagreement`` are reported in ``return_info`` but not used: on coarse probes the
+first is noise, and the second (low-pass) misses the front/back differences (measured on the course poses).
 """
 from __future__ import annotations
 
@@ -28,6 +35,7 @@ from corr_core.geometry.primitives import vertex_adjacency
 
 LOCAL_SCALES = (0.1, 0.2, 0.4)       # widths of exp(-(d/s)^2), units sqrt(area)
 CHIRALITY_WEIGHT = 0.3
+CHIRALITY_POOL = 2 / 3          # candidates kept: chirality agreement above this fraction of the best's
 
 
 def point_features(basis: MeshBasis, points: np.ndarray, chirality_weight: float = CHIRALITY_WEIGHT,
@@ -146,10 +154,15 @@ def extremities(basis: MeshBasis, max_points: int = 6, radius: float = 0.25, n_s
     return np.array(taken, dtype=np.int64)
 
 
-def ranked_assignments(D_source: np.ndarray, D_target: np.ndarray, keep: int = 6) -> list[tuple[np.ndarray, np.ndarray, float]]:
+def ranked_assignments(D_source: np.ndarray, D_target: np.ndarray, keep: int = 6,
+                       scale_invariant: bool = False) -> list[tuple[np.ndarray, np.ndarray, float]]:
     """Injective assignments between two small point sets ranked by geodesic distortion.
 
     Args: D_source: (p, p), D_target: (q, q) pairwise geodesic distances / sqrt(area); min(p, q) >= 3; p, q <= 7.
+        scale_invariant: compare the source distances with the assigned target distances times
+            mean(source distances) / mean(target distances) of the assigned points (a body that is globally
+            thinner or bent -- shorter geodesics at the same area -- then ranks the assignments as an isometric
+            one would; without it every assignment of such a pair costs about the same).
     Returns: up to ``keep`` (source index (r,), target index (r,), mean |distance difference|), best first,
         r = min(p, q) (all source points when p <= q).
     """
@@ -167,8 +180,10 @@ def ranked_assignments(D_source: np.ndarray, D_target: np.ndarray, keep: int = 6
         Ds = D_source[np.ix_(s, s)][iu]
         for t in permutations(range(q), r):
             t = np.array(t)
-            cost = float(np.mean(np.abs(Ds - D_target[np.ix_(t, t)][iu])))
-            results.append((s, t, cost))
+            Dt = D_target[np.ix_(t, t)][iu]
+            if scale_invariant:
+                Dt = Dt * (Ds.mean() / max(Dt.mean(), 1e-300))
+            results.append((s, t, float(np.mean(np.abs(Ds - Dt)))))
     results.sort(key=lambda x: (x[2], tuple(x[0]), tuple(x[1])))
     return results[:keep]
 
@@ -217,39 +232,100 @@ def hks_disagreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarr
     return float(np.mean(np.abs(hs - ht) / np.maximum(np.abs(hs) + np.abs(ht), 1e-300)))
 
 
+def chirality_agreement(source: MeshBasis, p2p_samples: np.ndarray, chirality_source: np.ndarray,
+                        chirality_target: np.ndarray) -> float:
+    """Correlation, in [-1, 1], of the template's chirality functions at its samples with the target's at their
+    images: > 0 when the map keeps the orientation *as the assigned points see it*, < 0 for a mirror map.
+
+    Args: p2p_samples: (s,) int target vertex of each of the first s template samples; chirality_source:
+        (n_s, P), chirality_target: (n_t, P) ``fmaps.chirality_functions`` of corresponding points (same order).
+    Chirality functions vary at the scale of the body, not of the sample spacing, so unlike
+    ``orientation_agreement`` (local linear fits) the measure holds on a coarse probe map.
+    """
+    cs = chirality_source[source.samples[:len(p2p_samples)]]
+    ct = chirality_target[np.asarray(p2p_samples)]
+    return float(np.sum(cs * ct) / max(np.sqrt(np.sum(cs**2) * np.sum(ct**2)), 1e-300))
+
+
+def wks_disagreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarray, n_energies: int = 50,
+                     variance: float = 6.0) -> float:
+    """Mean relative difference |w_S - w_T| / (w_S + w_T) of the wave kernel signatures (Aubry et al. 2011) of the
+    template samples and of their images, both on the *template's* log-energy bands (the target's eigenvalues
+    rescaled by its area / the template's, and the eigenfunctions normalized to unit mean square, so a scaled
+    copy has the same signature): (len(p2p_samples),) -> float.
+
+    The WKS separates frequencies better than the HKS (band-pass, not low-pass), so the small intrinsic
+    differences between the front and the back of a body (face, chest, feet) show in it; the map that agrees best
+    is the least distorted one in that sense. Descriptors cannot tell a mirror map: see ``orientation_agreement``.
+    """
+    first = int(np.flatnonzero(source.evals > 1e-8 * max(float(source.evals.max()), 1.0))[0])
+    log_s = np.log(source.evals[first:])
+    energies = np.linspace(log_s[0], log_s[-1] / 1.02 if log_s[-1] > 0 else log_s[-1], n_energies)
+    sigma = variance * (energies[1] - energies[0])
+
+    def signature(basis: MeshBasis, rows: np.ndarray, evals: np.ndarray) -> np.ndarray:
+        keep = evals > 1e-8 * max(float(evals.max()), 1.0)
+        bands = np.exp(-(energies[None, :] - np.log(evals[keep])[:, None]) ** 2 / (2 * sigma**2))   # (k, E)
+        phi2 = basis.area * basis.evecs[rows][:, keep] ** 2      # area-normalized: a scaled copy's are equal
+        return (phi2 @ bands) / np.maximum(bands.sum(axis=0), 1e-300)
+
+    ws = signature(source, source.samples[:len(p2p_samples)], source.evals)
+    wt = signature(target, np.asarray(p2p_samples), target.evals * (target.area / source.area))
+    return float(np.mean(np.abs(ws - wt) / np.maximum(ws + wt, 1e-300)))
+
+
 def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarray | None = None,
                   points_target: np.ndarray | None = None, keep: int = 4, k_init: int = 40, k_probe: int = 60,
-                  k_end: int = 100, step: int = 2, return_info: bool = False):
+                  k_end: int = 100, step: int = 2, n_probe: int = 1000, orientation_neighbours: int = 64,
+                  return_info: bool = False):
     """A map with no point given on the target (module docstring).
 
     Args:
         points_source, points_target: feature points of each mesh, original ids (default ``extremities`` of each).
-        keep: candidate assignments evaluated as maps (ZoomOut up to ``k_probe``; the chosen one then goes on
-            to ``k_end``).
+        keep: candidate assignments evaluated as maps (probes: ZoomOut up to ``k_probe`` on ``n_probe`` samples
+            of each mesh; the chosen one then goes on to ``k_end`` as ``map_from_points`` does).
+        orientation_neighbours: samples per local fit in ``orientation_agreement`` (a probe is coarser than the
+            sample spacing, so the local fits need more than the nearest few samples).
     Returns: (C, p2p_samples) as ``map_from_points``; with ``return_info`` also a dict (points, the chosen
-        assignment, every candidate's cost and disagreement).
+        assignment, every candidate's distortion, orientation agreement, WKS and HKS disagreement and probe map).
     """
     Ps = extremities(source) if points_source is None else source.to_local(points_source, what="template point")
     Pt = extremities(target) if points_target is None else target.to_local(points_target, what="target point")
     Gs, Gt = source.distances(Ps), target.distances(Pt)          # (p, n_s), (q, n_t), reused per candidate
-    Ds, Dt = Gs[:, Ps], Gt[:, Pt]
-    candidates = ranked_assignments(0.5 * (Ds + Ds.T), 0.5 * (Dt + Dt.T), keep=keep)
+    Ds, Dt = 0.5 * (Gs[:, Ps] + Gs[:, Ps].T), 0.5 * (Gt[:, Pt] + Gt[:, Pt].T)
+    candidates = ranked_assignments(Ds, Dt, keep=keep, scale_invariant=True)
     info = {"points_source": Ps, "points_target": Pt, "candidates": []}
     for s, t, cost in candidates:
+        # the target's distance fields in the template's units (same mean distance between the assigned points)
+        ratio = Ds[np.ix_(s, s)].sum() / max(Dt[np.ix_(t, t)].sum(), 1e-300)
         FS = point_features(source, Ps[s], distances=Gs[s])
-        FT = point_features(target, Pt[t], distances=Gt[t])
+        FT = point_features(target, Pt[t], distances=ratio * Gt[t])
+        n_pairs = len(s) * (len(s) - 1) // 2                     # the last columns: the chirality functions
         C, p2p = map_from_points(source, target, source.vids[Ps[s]], target.vids[Pt[t]], k_init=k_init,
-                                 k_end=min(k_probe, k_end), step=5, features=(FS, FT), n_zoomout=1000,
+                                 k_end=min(k_probe, k_end), step=5, features=(FS, FT), n_zoomout=n_probe,
                                  all_target_vertices=False)
         info["candidates"].append({"source": s, "target": t, "distortion": cost, "map": (C, p2p),
-                                   "orientation": orientation_agreement(source, target, p2p),
+                                   "orientation": orientation_agreement(source, target, p2p,
+                                                                        neighbours=orientation_neighbours),
+                                   "chirality": chirality_agreement(source, p2p, FS[:, -n_pairs:], FT[:, -n_pairs:]),
+                                   "wks": wks_disagreement(source, target, p2p),
                                    "hks": hks_disagreement(source, target, p2p)})
-    # orientation-preserving candidates (agreement > 0; the mirror maps have < 0), then the best HKS agreement
-    cands = info["candidates"]
-    pool = [c for c in cands if c["orientation"] > 0] or [max(cands, key=lambda c: c["orientation"])]
-    chosen = min(pool, key=lambda c: c["hks"])
+    chosen = _choose(info["candidates"])
     s, t = chosen["source"], chosen["target"]
     info["chosen"] = (Ps[s], Pt[t])
     C, p2p = chosen["map"]
     C, p2p = _zoomout_and_match(source, target, C, k_end, step, 2000, True)
     return (C, p2p, info) if return_info else (C, p2p)
+
+
+def _choose(candidates: list[dict], keep_fraction: float = CHIRALITY_POOL) -> dict:
+    """The candidate whose WKS agrees best among those that keep the assigned points' orientation: chirality
+    agreement above ``keep_fraction`` of the best candidate's (and > 0).
+
+    A mirror map's agreement is < 0; a map right on part of the body and mirrored elsewhere (only the hands or
+    only the feet swapped: a twist) keeps a fraction of it (measured 0.35-0.65 of the best on the course poses
+    and generated bodies); the true map and the orientation-preserving 180-degree turn keep all of it, and the
+    descriptors decide between those two."""
+    best = max(c["chirality"] for c in candidates)
+    pool = [c for c in candidates if c["chirality"] > keep_fraction * best] if best > 0 else []
+    return min(pool or [max(candidates, key=lambda c: c["chirality"])], key=lambda c: c["wks"])

@@ -1,14 +1,26 @@
-"""Pointwise steps after ZoomOut: full-resolution upsampling and a geodesic (trilateration) refinement.
+"""Pointwise steps after ZoomOut: full-resolution upsampling and refinements below ZoomOut's floor.
 
 ZoomOut works in a truncated spectral basis and has a floor of its own (from the *true* map it ends near one edge
-length of mean error on the course SCAPE poses). The refinement here works on vertices directly:
+length of mean error on the course SCAPE poses), and it leaves low-frequency mistakes that it cannot see: a
+twisted limb, a head turned about its axis, a slid knee. The refinements here work on vertices directly:
 
-``refine_geodesic``: pick anchors (farthest-point template samples) and their current images on the target;
-compute geodesic distances from the anchors on both meshes (heat method); move every template vertex to the
-target vertex, among the ``n_candidates`` nearest (in 3D) to its current image, whose distances to the images
-of its ``n_near`` nearest anchors best match its own distances to those anchors (least squares) -- a local
-trilateration that holds for (near-)isometric pairs whatever the pose. Repeat with the new anchor images.
-Anchor errors average out over the ``n_near`` anchors, so the map gets below the spectral floor.
+``refine_extrinsic`` (first default step): patch-wise rigid ICP. Each small template patch (a geodesic disc of about
+0.1 sqrt(area)) is fitted rigidly to its current images *robustly* (pairs far from the patch's consensus are
+dropped, so a patch that is partly wrong starts from the transform of its right part), then aligned by ICP
+(trimmed point-to-point). Every template vertex is moved by its patch's transform and takes the nearest target
+vertex whose normal agrees with its moved normal (a touching body part faces the other way and is never used),
+anywhere on the target (not only near its current image, so a region that was 0.1 sqrt(area) off comes back in
+a few rounds). Rounds repeat until the map stops changing.
+
+``refine_spectral`` (second default step): ZoomOut at full resolution with local candidates. On the 20 course
+SCAPE poses it leaves the mean error as it is and makes the landmarks safer (an elbow that ICP slid up the arm
+comes back); on non-isometric bodies (generated humanoid, ``vary_bodies``) it raises the error (ZoomOut assumes
+an isometry): use ``refine="extrinsic"`` there. ``refine_geodesic``: pick anchors (farthest-point template
+samples) and their current images on the target; compute geodesic distances from the anchors on both meshes
+(heat method); move every template vertex to the target vertex, among the ``n_candidates`` nearest (in 3D) to
+its current image, whose distances to the images of its ``n_near`` nearest anchors best match its own distances
+to those anchors (least squares) -- a local trilateration for (near-)isometric pairs; on request only (it was
+worse than ``refine_extrinsic`` on SCAPE).
 """
 from __future__ import annotations
 
@@ -143,23 +155,54 @@ def _kabsch_batch(X: np.ndarray, Y: np.ndarray, w: np.ndarray) -> tuple[np.ndarr
     return R, my - np.einsum("bij,bj->bi", R, mx)
 
 
+def _robust_kabsch_batch(X: np.ndarray, Y: np.ndarray, iterations: int = 4, cutoff: float = 2.5
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Rigid fits X (b,p,3) -> Y (b,p,3) that ignore wrong pairs: refit ``iterations`` times on the pairs whose
+    residual is within ``cutoff`` x the patch's median residual. Returns R (b,3,3), t (b,3). A patch whose current
+    images are partly wrong (a jump, a slide) then starts from the transform of its right part."""
+    w = np.ones(X.shape[:2])
+    for _ in range(iterations):
+        R, t = _kabsch_batch(X, Y, w)
+        r = np.linalg.norm(np.einsum("bij,bpj->bpi", R, X) + t[:, None, :] - Y, axis=2)
+        w = (r <= cutoff * np.median(r, axis=1, keepdims=True) + 1e-12).astype(float)
+    return R, t
+
+
+def _nearest_compatible(tree: cKDTree, normals_t: np.ndarray, P: np.ndarray, normals_p: np.ndarray,
+                        min_cos: float, k: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest target vertex to each point P (q,3) among its ``k`` nearest whose normal (n_t,3) makes a cosine
+    > ``min_cos`` with the point's normal (q,3): (ids (q,) int, distances (q,) float, inf when none qualifies).
+    The normal test rejects a touching body part (it faces the other way) and the inside of a thin part."""
+    d, c = tree.query(P, k=min(k, len(normals_t)))
+    d, c = d.reshape(len(P), -1), c.reshape(len(P), -1)
+    d = np.where(np.einsum("ij,ikj->ik", normals_p, normals_t[c]) > min_cos, d, np.inf)
+    best = np.argmin(d, axis=1)
+    rows = np.arange(len(P))
+    return c[rows, best], d[rows, best]
+
+
 def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, n_patches: int = 300,
                      patch_size: int = 64, icp_iterations: int = 6, rounds: int = 5, trim: float = 2.0,
-                     n_candidates: int = 32) -> np.ndarray:
+                     n_candidates: int | None = None, normal_cos: float = -1.0) -> np.ndarray:
     """Local rigid alignment (patch-wise ICP) of the template onto the target, then nearest vertices.
 
     A body moves almost rigidly at the scale of a small patch, so each template patch -- the ``patch_size``
     template samples geodesically nearest to one of the first ``n_patches`` farthest-point samples (about a
-    geodesic disc of radius sqrt(patch_size / (pi * n_samples)) sqrt(area)) -- is aligned to the target: a rigid
-    fit to its current images, then ``icp_iterations`` of point-to-point ICP against the target vertices (pairs
-    farther than ``trim`` x the patch's median distance get no weight). Every template vertex is moved by the
-    transform of its geodesically nearest patch centre and takes the target vertex nearest to its moved position
-    among the ``n_candidates`` nearest (3D) to its current image (so it cannot jump to a touching body part).
-    ``rounds`` repeats this from the new map. Template geodesics come from ``source.sample_distances`` (cached,
-    once per template); the target needs none.
+    geodesic disc of radius sqrt(patch_size / (pi * n_samples)) sqrt(area)) -- is aligned to the target: a robust
+    rigid fit to its current images (``_robust_kabsch_batch``: pairs far off the patch's consensus are dropped),
+    then ``icp_iterations`` of point-to-point ICP against the nearest target vertices (pairs farther than ``trim``
+    x the patch's median distance get no weight; ``normal_cos`` > -1 also requires the moved template normal and
+    the target normal to make a cosine above it -- off by default: it did not help on the course SCAPE poses and
+    made the coarse generated humanoid worse, the trimming already drops such pairs). Every template vertex is moved by the transform of its geodesically nearest patch centre and takes
+    the nearest normal-compatible target vertex (cosine > 0) to its moved position (``n_candidates`` = an int
+    restricts it instead to the ``n_candidates`` target vertices nearest to its current image, the older
+    behaviour: it cannot move more than a few edges a round). ``rounds`` repeats this from the new map.
+    Template geodesics come from ``source.sample_distances`` (cached, once per template); the target needs none.
 
     Args: source, target: bases; p2p: (n_s,) int current map. Returns (n_s,) int refined map.
     """
+    from corr_core.geometry.primitives import vertex_normals
+
     p2p = np.asarray(p2p, dtype=np.int64).copy()
     n_patches = min(n_patches, len(source.samples))
     patch_size = min(patch_size, len(source.samples))
@@ -168,21 +211,35 @@ def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, n_pa
     near = np.argsort(D_c[:, source.samples], axis=1, kind="stable")[:, :patch_size]
     members = source.samples[near]                                   # (n_patches, patch_size) vertex ids
     X = source.V[members]                                            # (b, p, 3)
+    N_s, N_t = vertex_normals(source.V, source.F), vertex_normals(target.V, target.F)
     tree = cKDTree(target.V)
-    n_candidates = min(n_candidates, target.n)
     for _ in range(rounds):
-        R, t = _kabsch_batch(X, target.V[p2p[members]], np.ones(members.shape))
+        R, t = _robust_kabsch_batch(X, target.V[p2p[members]])
         for _ in range(icp_iterations):
             moved = np.einsum("bij,bpj->bpi", R, X) + t[:, None, :]
-            d, j = tree.query(moved.reshape(-1, 3))
-            d, j = d.reshape(members.shape), j.reshape(members.shape)
-            w = (d <= trim * np.median(d, axis=1, keepdims=True) + 1e-12).astype(float)
+            normals = np.einsum("bij,bpj->bpi", R, N_s[members])
+            j, d = _nearest_compatible(tree, N_t, moved.reshape(-1, 3), normals.reshape(-1, 3), normal_cos)
+            j, d = j.reshape(members.shape), d.reshape(members.shape)
+            finite = np.isfinite(d)
+            med = np.array([np.median(row[ok]) if ok.any() else 0.0 for row, ok in zip(d, finite)])[:, None]
+            w = (finite & (d <= trim * med + 1e-12)).astype(float)
             R, t = _kabsch_batch(X, target.V[j], w)
-        moved = np.einsum("nij,nj->ni", R[owner], source.V) + t[owner]
-        _, cands = tree.query(target.V[p2p], k=n_candidates)
-        d = np.linalg.norm(target.V[cands] - moved[:, None, :], axis=2)
-        new = cands[np.arange(source.n), np.argmin(d, axis=1)]
+        new = _assign(tree, target, p2p, np.einsum("nij,nj->ni", R[owner], source.V) + t[owner],
+                      np.einsum("nij,nj->ni", R[owner], N_s), N_t, n_candidates)
         if np.array_equal(new, p2p):
             break
         p2p = new
     return p2p
+
+
+def _assign(tree: cKDTree, target: MeshBasis, p2p: np.ndarray, moved: np.ndarray, moved_normals: np.ndarray,
+            normals_t: np.ndarray, n_candidates: int | None) -> np.ndarray:
+    """Target vertex of every moved template vertex (n_s,3): the nearest normal-compatible one (None), or the
+    nearest among the ``n_candidates`` nearest to the current image; the current image where none qualifies."""
+    if n_candidates is None:
+        new, d = _nearest_compatible(tree, normals_t, moved, moved_normals, 0.0)
+        return np.where(np.isfinite(d), new, p2p)
+    _, cands = tree.query(target.V[p2p], k=min(n_candidates, target.n))
+    cands = cands.reshape(len(p2p), -1)
+    d = np.linalg.norm(target.V[cands] - moved[:, None, :], axis=2)
+    return cands[np.arange(len(p2p)), np.argmin(d, axis=1)]

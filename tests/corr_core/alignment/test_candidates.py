@@ -160,14 +160,27 @@ def test_sparse_solve_on_a_knn_graph_equals_the_knn_solve(solver):
                                   solvers.solve_labels(C, solver, sigma, 0, knn=4)["labels"])
 
 
-def test_graph_sigma_is_the_median_of_the_random_sample():
-    F, _ = planted_features(N=60)
-    C = mirrored_costs(F)
-    pairs, kind = candidates.candidate_pairs(candidates.rotation_invariant_descriptor(F, 8), k=3, n_random=2,
-                                             self_pairs=False)
-    gc = graph_costs.from_dense(C, pairs, np.isin(kind, candidates.SAMPLE_KINDS))
+@pytest.fixture
+def planted_graph():
+    """Builder of a candidate graph on planted shapes: ``planted_graph(N, k, n_random)`` ->
+    {"offsets": (N,) int, "C": (N, N, 8) dense costs, "pairs": (P, 2) int, "kind": (P,) int, "gc": GraphCosts of
+    those pairs with the random ones marked as the sample} (planted_features(N), k neighbours, n_random random
+    pairs per shape)."""
+    def build(N: int, k: int, n_random: int) -> dict:
+        F, offsets = planted_features(N=N)
+        C = mirrored_costs(F)
+        pairs, kind = candidates.candidate_pairs(candidates.rotation_invariant_descriptor(F, 8), k=k,
+                                                 n_random=n_random, self_pairs=False)
+        gc = graph_costs.from_dense(C, pairs, np.isin(kind, candidates.SAMPLE_KINDS))
+        return {"offsets": offsets, "C": C, "pairs": pairs, "kind": kind, "gc": gc}
+    return build
+
+
+def test_graph_sigma_is_the_median_of_the_random_sample(planted_graph):
+    graph = planted_graph(N=60, k=3, n_random=2)  # 120 random pairs >= SIGMA_SAMPLE_MIN
+    C, pairs, kind = graph["C"], graph["pairs"], graph["kind"]
     best = C.min(axis=2)[pairs[:, 0], pairs[:, 1]]
-    assert gc.auto_sigma() == pytest.approx(np.median(best[kind == candidates.PAIR_KINDS["random"]]))
+    assert graph["gc"].auto_sigma() == pytest.approx(np.median(best[kind == candidates.PAIR_KINDS["random"]]))
     assert graph_costs.from_dense(C, pairs).auto_sigma() == pytest.approx(np.median(best))
 
 
@@ -205,12 +218,9 @@ def test_graph_costs_from_engine_pairs_mark_the_sample_and_self_costs():
                                   C[pairs[0, 1], pairs[0, 0]])
 
 
-def test_evaluate_on_graph_costs_reports_the_pairs_computed():
-    F, offsets = planted_features(N=40)
-    C = mirrored_costs(F)
-    pairs, kind = candidates.candidate_pairs(candidates.rotation_invariant_descriptor(F, 8), k=4, n_random=1,
-                                             self_pairs=False)
-    gc = graph_costs.from_dense(C, pairs, np.isin(kind, candidates.SAMPLE_KINDS))
+def test_evaluate_on_graph_costs_reports_the_pairs_computed(planted_graph):
+    graph = planted_graph(N=40, k=4, n_random=1)
+    gc, pairs, offsets = graph["gc"], graph["pairs"], graph["offsets"]
     sol = {"names": [str(i) for i in range(40)], **solvers.solve_alignment(gc, solver="spectral")}
     truth = {str(i): int(o) for i, o in enumerate(offsets)}
     m = measures.evaluate_alignment(gc, sol, truth, seeds=[0, 1], restarts=1, compare_solvers=True, icm_starts=1)

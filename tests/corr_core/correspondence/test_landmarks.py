@@ -1,10 +1,11 @@
-"""Landmark files: named and bare ids, 1-based detection, errors naming file and line; subset positions."""
+"""Landmark files: named and bare ids, 1-based detection, errors naming file and line; writing them back;
+subset positions."""
 import warnings
 
 import numpy as np
 import pytest
 
-from corr_core.correspondence.landmarks import read_landmarks, subset_positions
+from corr_core.correspondence.landmarks import format_landmarks, read_landmarks, subset_positions, write_landmarks
 
 
 def test_read_landmarks_named_and_bare(tmp_path):
@@ -51,3 +52,23 @@ def test_subset_positions_and_missing_ids_named():
     np.testing.assert_array_equal(subset_positions(np.array([7, 3, 9, 1]), np.array([9, 7])), [2, 0])
     with pytest.raises(ValueError, match=r"sparse.txt: sparse landmark vertices \[5\] are not in all.txt"):
         subset_positions(np.array([7, 3]), np.array([3, 5]), "sparse.txt", "all.txt")
+
+
+def test_write_landmarks_round_trips_through_read_landmarks(tmp_path):
+    ids, names = np.array([361, 0, 12464], dtype=np.int64), ["Left Toe", "Right Toe", "Vertex"]
+    assert format_landmarks(ids, names) == "361,Left Toe\n0,Right Toe\n12464,Vertex\n"
+    path = tmp_path / "sub" / "lm.txt"  # the folder is created
+    write_landmarks(path, ids, names)
+    back_ids, back_names = read_landmarks(path, 12498)
+    np.testing.assert_array_equal(back_ids, ids)
+    assert back_names == names
+    assert format_landmarks([], []) == ""
+
+
+def test_format_landmarks_rejects_what_read_landmarks_cannot_read_back():
+    with pytest.raises(ValueError, match="2 vertex ids but 1 names"):
+        format_landmarks([1, 2], ["A"])
+    with pytest.raises(ValueError, match=r"'Left, Toe'"):
+        format_landmarks([1], ["Left, Toe"])
+    with pytest.raises(ValueError, match="negative vertex id -1"):
+        format_landmarks([-1], ["A"])

@@ -1,0 +1,132 @@
+"""The faster numerical paths of the dense basis and functional maps give the answers of the plain ones:
+basis eigenpairs (mid-band shift with its fallback), farthest-point samples, float32 nearest rows, the normal
+equations of fmap_from_p2p, the row-decoupled functional-map fit, ZoomOut's sample-then-vertex schedule, and the
+benchmark's CPU-time ratios."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from corr_core.correspondence.dense import basis as dense_basis
+from corr_core.correspondence.dense import fmaps, mesh_basis, zoomout
+from corr_core.geometry.laplacian import eigenpairs, laplacian_and_mass
+from corr_core.geometry.primitives import face_areas
+from corr_core.geometry.sampling import farthest_point_samples
+from tests.helpers import sphere
+
+
+@pytest.fixture(scope="module")
+def ellipsoid():
+    V, F = sphere(n=600)
+    V = V * np.array([1.0, 0.6, 0.35])
+    return V, F
+
+
+def _same_spectrum(evals, evecs, ref_evals, ref_evecs, M):
+    assert np.allclose(evals, ref_evals, rtol=1e-8, atol=1e-10)
+    overlap = np.abs(ref_evecs.T @ (M @ evecs))          # (k, k): each vector equal up to sign, or the same
+    assert np.allclose(np.linalg.svd(overlap, compute_uv=False), 1.0, atol=1e-6)   # subspace of a near-double one
+
+
+def test_basis_eigenpairs_equal_the_shared_eigenpairs(ellipsoid):
+    V, F = ellipsoid
+    L, M = laplacian_and_mass(V, F)
+    evals, evecs = dense_basis.basis_eigenpairs(L, M, 20, float(face_areas(V, F).sum()))
+    _same_spectrum(evals, evecs, *eigenpairs(V, F, k=20), M)
+    assert np.allclose(evecs.T @ (M @ evecs), np.eye(20), atol=1e-8)
+
+
+def test_basis_eigenpairs_fall_back_when_the_weyl_shift_misses_the_bottom(ellipsoid):
+    """An area 50x too small puts the shift far above the 20 smallest eigenvalues: the nearest 20 are mid-band;
+    the check must notice it and solve again near 0."""
+    V, F = ellipsoid
+    L, M = laplacian_and_mass(V, F)
+    evals, evecs = dense_basis.basis_eigenpairs(L, M, 20, float(face_areas(V, F).sum()) / 50.0)
+    _same_spectrum(evals, evecs, *eigenpairs(V, F, k=20), M)
+
+
+def test_basis_eigenpairs_are_bit_identical_run_to_run(ellipsoid):
+    V, F = ellipsoid
+    a = mesh_basis(V, F, k=15, n_samples=50)
+    b = mesh_basis(V, F, k=15, n_samples=50)
+    assert np.array_equal(a.evecs, b.evecs) and np.array_equal(a.evals, b.evals)
+
+
+def test_farthest_samples_equal_the_shared_sampler(ellipsoid):
+    V, _ = ellipsoid
+    V = np.vstack([V, V[:3]])                             # duplicated points: ties and zero distances
+    for start in (0, 7):
+        assert np.array_equal(dense_basis.farthest_samples(V, 200, start), farthest_point_samples(V, 200, start))
+    assert np.array_equal(dense_basis.farthest_samples(V, len(V), 0), farthest_point_samples(V, len(V), 0))
+
+
+def test_nearest_rows_is_the_exact_nearest_neighbour_with_lowest_index_ties():
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(700, 40))
+    queries = points[rng.integers(0, 700, 300)] + 1e-3 * rng.normal(size=(300, 40))
+    d = ((queries[:, None, :] - points[None, :, :]) ** 2).sum(axis=2)
+    assert np.array_equal(fmaps.nearest_rows(queries, points, chunk=64), np.argmin(d, axis=1))
+    doubled = np.vstack([points[:5], points[:5]])          # rows 0..4 repeated as 5..9
+    assert np.array_equal(fmaps.nearest_rows(points[:5], doubled), np.arange(5))
+    with pytest.raises(ValueError, match="nearest_rows"):
+        fmaps.nearest_rows(queries, points[:, :3])
+
+
+@pytest.mark.parametrize("rows", [300, 12])               # well-posed (normal equations) and rank-deficient (SVD)
+def test_fmap_from_p2p_is_the_least_squares_solution(rows):
+    rng = np.random.default_rng(rows)
+    Phi_S = rng.normal(size=(rows, 20))
+    Phi_T = rng.normal(size=(400, 25))
+    p2p = rng.integers(0, 400, rows)
+    expected = np.linalg.lstsq(Phi_S, Phi_T[p2p], rcond=None)[0]
+    assert np.allclose(fmaps.fmap_from_p2p(p2p, Phi_S, Phi_T), expected, atol=1e-9)
+
+
+def test_row_decoupled_fit_equals_the_full_system():
+    """Without the orientation term the fit solves one small system per row of C; with a zero orientation
+    operator it goes through the full ks * kt system: the same minimizer."""
+    rng = np.random.default_rng(5)
+    ks, kt, q = 9, 7, 12
+    A_S, A_T = rng.normal(size=(ks, q)), rng.normal(size=(kt, q))
+    ev_S, ev_T = np.sort(rng.uniform(0, 50, ks)), np.sort(rng.uniform(0, 50, kt))
+    fast = fmaps.fit_functional_map(A_S, A_T, ev_S, ev_T, w_orient=0.0)
+    full = fmaps.fit_functional_map(A_S, A_T, ev_S, ev_T, np.zeros((1, ks, ks)), np.zeros((1, kt, kt)), w_orient=1.0)
+    assert fast.shape == (ks, kt) and np.allclose(fast, full, atol=1e-10)
+
+
+def test_zoomout_matches_samples_first_and_every_vertex_in_the_last_iterations(ellipsoid, monkeypatch):
+    V, F = ellipsoid
+    B = mesh_basis(V, F, k=30, n_samples=100)
+    seen = []
+    real = zoomout.p2p_from_fmap
+
+    def spy(C, rows, cands, adjoint=True):
+        seen.append(len(cands))
+        return real(C, rows, cands, adjoint=adjoint)
+
+    monkeypatch.setattr(zoomout, "p2p_from_fmap", spy)
+    C = zoomout.zoomout(B, B, np.eye(10), k_end=30, step=5, all_target_vertices=True)   # k = 10, 15, 20, 25
+    assert seen == [100, 100, 100, B.n]                  # default full_band=0.1: k >= 27, at least the last one
+    assert np.allclose(np.abs(np.diag(C)), 1.0, atol=1e-6)   # self-map: the identity stays the identity
+    seen.clear()
+    zoomout.zoomout(B, B, np.eye(10), k_end=30, step=5, all_target_vertices=True, full_band=0.5)   # k >= 15
+    assert seen == [100, B.n, B.n, B.n]
+    seen.clear()
+    zoomout.zoomout(B, B, np.eye(10), k_end=30, step=5, all_target_vertices=True, full_band=1.0)
+    assert seen == [B.n] * 4
+    seen.clear()
+    zoomout.zoomout(B, B, np.eye(10), k_end=30, step=5, all_target_vertices=False)
+    assert seen == [100] * 4
+
+
+def test_bench_prints_each_project_method_over_each_pyfm_mode():
+    from bench.correspondence import time_ratio_lines, time_ratios
+
+    summary = {"pyfm_none": {"seconds": 18.0}, "pyfm_5pts": {"seconds": 24.0},
+               "dense_sparse": {"seconds": 6.0}, "dense_auto": {"seconds": 9.0}}
+    ratios = time_ratios(summary)
+    assert ratios == {("dense_sparse", "pyfm_none"): 6 / 18, ("dense_sparse", "pyfm_5pts"): 0.25,
+                      ("dense_auto", "pyfm_none"): 0.5, ("dense_auto", "pyfm_5pts"): 9 / 24}
+    lines = time_ratio_lines(summary)
+    assert "dense_auto / pyfm_none: 0.500  (above 1/3)" in "\n".join(lines)
+    assert time_ratio_lines({"dense_sparse": {"seconds": 1.0}}) == []

@@ -1,0 +1,68 @@
+"""refine_extrinsic: a region pushed several edges off comes back; the normal test skips a touching part."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from corr_core.correspondence.dense import measures, mesh_basis, refine_extrinsic
+from corr_core.correspondence.dense.refine import _nearest_compatible
+from corr_core.generate import humanoid
+
+FAST = {"n_patches": 120, "rounds": 5}
+
+
+@pytest.fixture(scope="module")
+def pair():
+    V, F = humanoid.make_humanoid_rest(grid_step=0.045)
+    W, _ = humanoid.skinning_weights(V, F)
+    Vp = humanoid.pose_mesh(V, W, humanoid.random_pose(np.random.default_rng(5)))
+    return mesh_basis(V, F, k=20, n_samples=600), mesh_basis(Vp, F, k=20, n_samples=600)
+
+
+def _slid_region(S, T, offset_edges: float = 5.0):
+    """The true map with a geodesic disc (radius 0.12 sqrt(area)) of the torso sent ``offset_edges`` mean edge
+    lengths sideways on the target: (p2p (n,) int, region (r,) int)."""
+    centre = int(np.argmin(np.linalg.norm(S.V - np.array([0.0, 1.15, 0.2]), axis=1)))
+    region = np.flatnonzero(S.distances([centre])[0] < 0.12)
+    edge = np.linalg.norm(T.V[T.F[:, 0]] - T.V[T.F[:, 1]], axis=1).mean()
+    p2p = np.arange(S.n)
+    p2p[region] = cKDTree(T.V).query(T.V[region] + np.array([offset_edges * edge, 0.0, 0.0]))[1]
+    return p2p, region
+
+
+def _error(T, p2p, vertices):
+    return float(measures.dense_errors(T.V, T.F, {"m": p2p}, np.arange(T.n), vertices=vertices)["m"].mean())
+
+
+def test_refine_extrinsic_brings_back_a_region_slid_several_edges(pair):
+    S, T = pair
+    p2p, region = _slid_region(S, T)
+    before = _error(T, p2p, region)
+    fixed = refine_extrinsic(S, T, p2p, **FAST)
+    local_only = refine_extrinsic(S, T, p2p, n_candidates=8, **FAST)   # older rule: stay near the current image
+    after, after_local = _error(T, fixed, region), _error(T, local_only, region)
+    assert after < 0.3 * before, (before, after)
+    assert after < after_local, (after, after_local)
+
+
+def test_refine_extrinsic_keeps_the_true_map(pair):
+    S, T = pair
+    kept = refine_extrinsic(S, T, np.arange(S.n), **FAST)
+    edge = np.linalg.norm(T.V[T.F[:, 0]] - T.V[T.F[:, 1]], axis=1).mean() / T.scale
+    assert _error(T, kept, np.arange(0, S.n, 7)) < 0.5 * edge        # most vertices stay exactly where they are
+
+
+def test_nearest_compatible_skips_a_part_facing_the_other_way():
+    """Two sheets 0.1 apart facing each other (like a thigh touching the other thigh): a point just below the
+    upper sheet with an upward normal belongs to the lower sheet, whose normals point up."""
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 11), np.linspace(0, 1, 11)), -1).reshape(-1, 2)
+    lower = np.column_stack([g, np.zeros(len(g))])
+    upper = np.column_stack([g, np.full(len(g), 0.1)])
+    V = np.vstack([lower, upper])
+    N = np.vstack([np.tile([0.0, 0.0, 1.0], (len(g), 1)), np.tile([0.0, 0.0, -1.0], (len(g), 1))])
+    P, NP = np.array([[0.5, 0.5, 0.08]]), np.array([[0.0, 0.0, 1.0]])
+    ids, d = _nearest_compatible(cKDTree(V), N, P, NP, min_cos=0.5)
+    assert ids[0] < len(g) and np.isclose(d[0], 0.08)
+    ids, d = _nearest_compatible(cKDTree(V), N, P, -NP, min_cos=0.5, k=4)
+    assert ids[0] >= len(g)
