@@ -201,11 +201,18 @@ def test_quiet_still_prints_each_failure(project, tmp_path):
     assert "FAILED feat[s003]" in r.stderr and "marker" in r.stderr, r.stderr
 
 
+def _sigint_default():
+    """In the child: Ctrl-C handled as in a terminal. A test run started in the background by a non-interactive
+    shell (``cmd &``, nohup) inherits SIGINT ignored, and Python then never raises KeyboardInterrupt."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_to_the_process_group_shuts_down_without_worker_tracebacks(project, tmp_path):
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     proc = subprocess.Popen([sys.executable, "-m", "stages", "run", str(project), "--set", "work=2000",
                              "--workers", "2"], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=_sigint_default)
     lines: list[str] = []
     started = threading.Event()
 
