@@ -77,22 +77,15 @@ def dense_init(template_basis, target_basis, template_mesh, target_mesh, landmar
 def dense_refine(template_basis, target_basis, initial, *, refine: str = "extrinsic+spectral", n_patches: int = 300,
                  patch_size: int = 64, rounds: int = 5, icp_iterations: int = 6) -> dict:
     """The dense map: the initial map upsampled to every template vertex (``upsample_spectral``), then refined
-    (``refine``: "extrinsic+spectral" = patch-wise rigid ICP then full-resolution ZoomOut, as ``dense_map``;
-    "extrinsic", "spectral", "none"). Returns {"vertex_map": (n_template,) int target vertex id (original ids;
+    (``refine``: steps of ``refine.refine_map``; "extrinsic+spectral" = patch-wise rigid ICP then full-resolution
+    ZoomOut, as ``dense_map``; "extrinsic", "spectral", "none", ...). Returns {"vertex_map": (n_template,) int target vertex id (original ids;
     -1 off the template's kept component)} or {"skipped": why}."""
     if "skipped" in initial:
         return {"skipped": initial["skipped"]}
-    steps = {"extrinsic+spectral": ("extrinsic", "spectral"), "extrinsic": ("extrinsic",), "spectral": ("spectral",),
-             "none": ()}
-    if refine not in steps:
-        raise ValueError(f"corr.dense_refine: refine must be one of {list(steps)}, got {refine!r}")
     S, T = _basis(template_basis, "template"), _basis(target_basis, "target")
     p2p = dense.upsample_spectral(S, T, np.asarray(initial["C"]), np.asarray(initial["p2p_samples"]))
-    if "extrinsic" in steps[refine]:
-        p2p = dense.refine_extrinsic(S, T, p2p, n_patches=n_patches, patch_size=patch_size, rounds=rounds,
-                                     icp_iterations=icp_iterations)
-    if "spectral" in steps[refine]:
-        p2p = dense.refine_spectral(S, T, p2p)
+    extrinsic = {"n_patches": n_patches, "patch_size": patch_size, "rounds": rounds, "icp_iterations": icp_iterations}
+    p2p = dense.refine_map(S, T, p2p, refine, {"extrinsic": extrinsic})
     return {"vertex_map": map_to_original(S, T, p2p)}
 
 

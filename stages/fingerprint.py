@@ -143,6 +143,23 @@ def _resolve(chain: tuple[str, ...], namespace: dict, project: frozenset) -> lis
     return found
 
 
+def _constant_repr(obj: Any, held: list) -> str:
+    """``repr`` of a constant that is the same in every process: a function or class inside it (a dispatch table
+    such as ``{"a": step_a}``) is written by its qualified name, not by its address, and appended to ``held`` as
+    (qualified name, object) so that its code is fingerprinted too."""
+    if inspect.isfunction(obj) or inspect.isclass(obj):
+        name = f"{obj.__module__}.{obj.__qualname__}"
+        held.append((name, obj))
+        return f"<{name}>"
+    if isinstance(obj, dict):
+        return "{" + ", ".join(f"{_constant_repr(k, held)}: {_constant_repr(v, held)}" for k, v in obj.items()) + "}"
+    if isinstance(obj, (list, tuple)):
+        return type(obj).__name__ + "(" + ", ".join(_constant_repr(v, held) for v in obj) + ")"
+    if isinstance(obj, frozenset):
+        return "frozenset(" + ", ".join(sorted(_constant_repr(v, held) for v in obj)) + ")"
+    return repr(obj)
+
+
 def code_fingerprint(func: Any, packages: tuple[str, ...] | frozenset = ()) -> tuple[str, dict[str, str]]:
     """Fingerprint ``func`` and every project function/class/constant it reaches.
 
@@ -162,7 +179,11 @@ def code_fingerprint(func: Any, packages: tuple[str, ...] | frozenset = ()) -> t
         if qual in parts:
             continue
         if qual.startswith("const:"):
-            parts[qual] = hashlib.blake2b(repr(obj).encode(), digest_size=8).hexdigest()
+            held: list[tuple[str, Any]] = []
+            text = _constant_repr(obj, held)
+            # plain constants keep repr(obj), so existing cache keys stay valid
+            parts[qual] = hashlib.blake2b((text if held else repr(obj)).encode(), digest_size=8).hexdigest()
+            stack.extend((name, f) for name, f in held if _is_project(f, project))
             continue
         digest, refs = _digest_and_refs(obj)
         parts[qual] = digest

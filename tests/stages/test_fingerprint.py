@@ -90,3 +90,25 @@ def test_only_declared_packages_are_followed(load, tmp_path):
     assert "fp_dep_pkg.dep" in inside               # a plugin-declared package: followed
     sys.modules.pop("fp_dep_pkg", None)
     sys.path.remove(str(tmp_path))
+
+
+TABLE = '''
+def step_a(x):
+    return x + 1
+
+def step_b(x):
+    return x * 2
+
+STEPS = {"a": step_a, "b": step_b}
+
+def stage(x, name="a"):
+    return STEPS[name](x)
+'''
+
+
+def test_a_dispatch_table_constant_is_hashed_by_names_and_follows_its_functions(load):
+    first = code_fingerprint(load(TABLE).stage)
+    again = code_fingerprint(load(TABLE).stage)            # another import: other function addresses
+    assert first == again
+    assert "fp_mod.step_a" in first[1] and "fp_mod.step_b" in first[1]
+    assert digest(load(TABLE.replace("return x * 2", "return x * 3"))) != first[0]   # a held function's body

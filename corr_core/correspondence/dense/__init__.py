@@ -20,11 +20,12 @@ import numpy as np
 
 from corr_core.correspondence.dense.basis import MeshBasis, map_to_original, mesh_basis
 from corr_core.correspondence.dense.init import map_automatic, map_from_points
-from corr_core.correspondence.dense.refine import refine_extrinsic, refine_geodesic, refine_spectral, upsample_spectral
+from corr_core.correspondence.dense.refine import (refine_extrinsic, refine_geodesic, refine_map, refine_spectral,
+                                                   upsample_spectral)
 from corr_core.correspondence.dense.transfer import transfer_landmarks
 
 __all__ = ["MeshBasis", "mesh_basis", "map_to_original", "dense_map", "map_from_points", "map_automatic", "upsample_spectral",
-           "refine_extrinsic", "refine_geodesic", "refine_spectral", "transfer_landmarks"]
+           "refine_extrinsic", "refine_geodesic", "refine_map", "refine_spectral", "transfer_landmarks"]
 
 
 def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarray, F_target: np.ndarray,
@@ -39,9 +40,9 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
         landmarks_template, landmarks_target: (L,) int corresponding vertex ids (L >= 3, e.g. the 5 sparse
             landmarks) or both None for the automatic map (no point needed on either mesh).
         k: final spectral basis size (ZoomOut end); k_init: size of the initial functional map.
-        refine: pointwise steps after ZoomOut, applied in the order named: "extrinsic+spectral" (default:
-            ``refine_extrinsic`` then ``refine_spectral``), "extrinsic", "spectral", "geodesic"
-            (``refine_geodesic``), "geodesic+extrinsic" or None.
+        refine: pointwise steps after ZoomOut, applied in the order named (``refine.refine_map``):
+            "extrinsic+spectral" (default: ``refine_extrinsic`` then ``refine_spectral``), "extrinsic",
+            "spectral", "geodesic" (``refine_geodesic``), any of them joined by "+", or None.
         basis_template, basis_target: precomputed ``mesh_basis`` results (reuse them across pairs).
         refine_options: {"geodesic" | "extrinsic" | "spectral": kwargs} for the refinement functions.
     Returns:
@@ -61,13 +62,5 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
             raise ValueError(f"landmarks must be two (L,) id lists of equal length L >= 3, got {ls.shape} and "
                              f"{lt.shape}")
         C, p2p_samples = map_from_points(S, T, ls, lt, k_init=k_init, k_end=k)
-    steps = {None: (), "extrinsic": ("extrinsic",), "spectral": ("spectral",), "geodesic": ("geodesic",),
-             "extrinsic+spectral": ("extrinsic", "spectral"), "geodesic+extrinsic": ("geodesic", "extrinsic")}
-    if refine not in steps:
-        raise ValueError(f"refine must be one of {list(steps)}, got {refine!r}")
-    options = refine_options or {}
-    p2p = upsample_spectral(S, T, C, p2p_samples)
-    for step in steps[refine]:
-        fn = {"geodesic": refine_geodesic, "extrinsic": refine_extrinsic, "spectral": refine_spectral}[step]
-        p2p = fn(S, T, p2p, **options.get(step, {}))
+    p2p = refine_map(S, T, upsample_spectral(S, T, C, p2p_samples), refine, refine_options)
     return map_to_original(S, T, p2p)

@@ -23,6 +23,7 @@ from corr_core.geometry import geodesic
 from corr_core.geometry.intrinsic import IntrinsicMesh
 from corr_core.geometry.laplacian import laplacian_and_mass, start_vector
 from corr_core.geometry.primitives import face_areas, face_normals
+from corr_core.geometry.sampling import farthest_point_samples
 
 
 @dataclass
@@ -192,35 +193,6 @@ def _shift_invert_eigsh(L, M, k: int, sigma: float) -> tuple[np.ndarray, np.ndar
     return sla.eigsh(L, k=k, M=M, sigma=sigma, which="LM", v0=start_vector(L.shape[0]), OPinv=op)
 
 
-def farthest_samples(V: np.ndarray, k: int, start: int) -> np.ndarray:
-    """Greedy Euclidean farthest-point samples: (n,3) float -> (k,) int64, [0] == start, ties to the lowest index.
-
-    The same samples as ``corr_core.geometry.sampling.farthest_point_samples(V, k, start)`` (same distances,
-    computed per coordinate), without its per-step bookkeeping: ~10x faster for 2000 samples of 12,500 vertices.
-    """
-    X, Y, Z = (np.ascontiguousarray(V[:, c], dtype=np.float64) for c in range(3))
-    chosen = np.empty(k, dtype=np.int64)
-    nearest = np.full(len(V), np.inf)
-    d = np.empty(len(V))
-    tmp = np.empty(len(V))
-    v = int(start)
-    for s in range(k):
-        chosen[s] = v
-        np.subtract(X, X[v], out=d)
-        d *= d
-        np.subtract(Y, Y[v], out=tmp)
-        tmp *= tmp
-        d += tmp
-        np.subtract(Z, Z[v], out=tmp)
-        tmp *= tmp
-        d += tmp
-        np.sqrt(d, out=d)
-        np.minimum(nearest, d, out=nearest)
-        nearest[v] = -np.inf                               # chosen points stay at -inf (minimum keeps it)
-        v = int(np.argmax(nearest))
-    return chosen
-
-
 def mesh_basis(V: np.ndarray, F: np.ndarray, k: int = 100, n_samples: int = 2000, name: str = "mesh") -> MeshBasis:
     """Eigenpairs, vertex areas and farthest-point samples of one mesh.
 
@@ -244,7 +216,7 @@ def mesh_basis(V: np.ndarray, F: np.ndarray, k: int = 100, n_samples: int = 2000
     evals, evecs = basis_eigenpairs(L, M, min(k, len(V) - 1), area)
     mass = np.asarray(M.diagonal(), dtype=np.float64)
     start = int(np.argmax(np.linalg.norm(V - V.mean(axis=0), axis=1)))
-    samples = farthest_samples(V, min(n_samples, len(V)), start=start)
+    samples = farthest_point_samples(V, min(n_samples, len(V)), start=start)
     return MeshBasis(V=V, F=F, evals=evals, evecs=evecs, mass=mass, area=area, samples=samples, vids=mesh.vids,
                      n_full=mesh.n_full)
 

@@ -216,12 +216,10 @@ def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, n_pa
     for _ in range(rounds):
         R, t = _robust_kabsch_batch(X, target.V[p2p[members]])
         for _ in range(icp_iterations):
-            moved = np.einsum("bij,bpj->bpi", R, X) + t[:, None, :]
-            normals = np.einsum("bij,bpj->bpi", R, N_s[members])
-            j, d = _nearest_compatible(tree, N_t, moved.reshape(-1, 3), normals.reshape(-1, 3), normal_cos)
-            j, d = j.reshape(members.shape), d.reshape(members.shape)
+            j, d = _icp_pairs(tree, N_t, np.einsum("bij,bpj->bpi", R, X) + t[:, None, :],
+                              N_s[members], R, normal_cos)
             finite = np.isfinite(d)
-            med = np.array([np.median(row[ok]) if ok.any() else 0.0 for row, ok in zip(d, finite)])[:, None]
+            med = _finite_row_median(d, finite)
             w = (finite & (d <= trim * med + 1e-12)).astype(float)
             R, t = _kabsch_batch(X, target.V[j], w)
         new = _assign(tree, target, p2p, np.einsum("nij,nj->ni", R[owner], source.V) + t[owner],
@@ -230,6 +228,27 @@ def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, n_pa
             break
         p2p = new
     return p2p
+
+
+def _icp_pairs(tree: cKDTree, normals_t: np.ndarray, moved: np.ndarray, patch_normals: np.ndarray, R: np.ndarray,
+               normal_cos: float) -> tuple[np.ndarray, np.ndarray]:
+    """ICP partners of the moved patch points (b,p,3): target ids (b,p) int and distances (b,p) float (inf: no
+    compatible partner). ``normal_cos`` <= -1: no normal test, the plain nearest vertex (one k-d tree query per
+    point instead of the ``_nearest_compatible`` search among 8)."""
+    shape = moved.shape[:2]
+    if normal_cos <= -1.0:
+        d, j = tree.query(moved.reshape(-1, 3))
+    else:
+        normals = np.einsum("bij,bpj->bpi", R, patch_normals)
+        j, d = _nearest_compatible(tree, normals_t, moved.reshape(-1, 3), normals.reshape(-1, 3), normal_cos)
+    return j.reshape(shape), d.reshape(shape)
+
+
+def _finite_row_median(d: np.ndarray, finite: np.ndarray) -> np.ndarray:
+    """Median of the finite entries of each row of d (b,p) -> (b,1); 0 for a row with none."""
+    if finite.all():
+        return np.median(d, axis=1, keepdims=True)
+    return np.array([np.median(row[ok]) if ok.any() else 0.0 for row, ok in zip(d, finite)])[:, None]
 
 
 def _assign(tree: cKDTree, target: MeshBasis, p2p: np.ndarray, moved: np.ndarray, moved_normals: np.ndarray,
@@ -243,3 +262,27 @@ def _assign(tree: cKDTree, target: MeshBasis, p2p: np.ndarray, moved: np.ndarray
     cands = cands.reshape(len(p2p), -1)
     d = np.linalg.norm(target.V[cands] - moved[:, None, :], axis=2)
     return cands[np.arange(len(p2p)), np.argmin(d, axis=1)]
+
+
+REFINE_STEPS = ("extrinsic", "spectral", "geodesic")      # refine_<step> of this module
+
+
+def refine_map(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, refine: str | None = "extrinsic+spectral",
+               options: dict | None = None) -> np.ndarray:
+    """The pointwise refinements named by ``refine``, in its order: steps of ``REFINE_STEPS`` joined by "+"
+    (e.g. "extrinsic+spectral", the default of ``dense_map`` and of the ``corr.dense_refine`` stage), or None /
+    "none" for no step.
+
+    Args: source, target: bases; p2p: (n_s,) int current map (local ids); options: {step: kwargs of its function}.
+    Returns: (n_s,) int refined map.
+    """
+    names = [] if refine in (None, "none") else str(refine).split("+")
+    unknown = [n for n in names if n not in REFINE_STEPS]
+    if unknown or (refine is not None and not isinstance(refine, str)):
+        raise ValueError(f"refine must be None, 'none' or steps of {list(REFINE_STEPS)} joined by '+' (e.g. "
+                         f"'extrinsic+spectral'), got {refine!r}")
+    steps = {"extrinsic": refine_extrinsic, "spectral": refine_spectral, "geodesic": refine_geodesic}
+    options = options or {}
+    for name in names:
+        p2p = steps[name](source, target, p2p, **options.get(name, {}))
+    return p2p

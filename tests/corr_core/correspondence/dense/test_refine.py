@@ -66,3 +66,15 @@ def test_nearest_compatible_skips_a_part_facing_the_other_way():
     assert ids[0] < len(g) and np.isclose(d[0], 0.08)
     ids, d = _nearest_compatible(cKDTree(V), N, P, -NP, min_cos=0.5, k=4)
     assert ids[0] >= len(g)
+
+
+def test_refine_map_runs_the_named_steps_in_order_and_rejects_unknown_ones(pair):
+    from corr_core.correspondence.dense import refine_map, refine_spectral
+
+    S, T = pair
+    p2p, _ = _slid_region(S, T)
+    both = refine_map(S, T, p2p, "extrinsic+spectral", {"extrinsic": FAST})
+    assert np.array_equal(both, refine_spectral(S, T, refine_extrinsic(S, T, p2p, **FAST)))
+    assert np.array_equal(refine_map(S, T, p2p, None), p2p) and np.array_equal(refine_map(S, T, p2p, "none"), p2p)
+    with pytest.raises(ValueError, match="refine must be"):
+        refine_map(S, T, p2p, "extrinsic+smooth")
