@@ -2,6 +2,7 @@
 
 Per mesh (cached, shared by both methods): ``corr.dense_basis`` (Laplace-Beltrami eigenpairs, vertex areas,
 farthest-point samples; ``corr_core.correspondence.dense.mesh_basis``) as plain arrays.
+Once: ``corr.dense_template`` -- the template's basis with its patch-centre geodesics (for every refinement task).
 Per test mesh: ``corr.dense_init`` -- the initial map, ``mode`` "sparse" (the 5 sparse landmarks given on both
 meshes: ``dense_sparse``) or "auto" (nothing given on the target: ``dense_auto``); ``corr.dense_refine`` -- the
 full-resolution map and its pointwise refinement (its own stage: changing its params reruns only it and the
@@ -45,22 +46,42 @@ def dense_basis(mesh, *, k: int = 100, n_samples: int = 2000) -> dict:
     return dense.mesh_basis(mesh["V"], mesh["F"], k=k, n_samples=n_samples, name=mesh["name"]).to_arrays()
 
 
+@register("corr.dense_template", group="correspondence", fanout="once")
+def dense_template(template_basis, *, n_patches: int = 300) -> dict:
+    """What every target's tasks need of the template, computed once instead of once per target:
+    ``corr.dense_basis``'s arrays plus "sample_distances" ((n_patches, n) float / sqrt(area): geodesics from the
+    patch centres of ``refine_extrinsic``) and "extremities" ((p,) int local ids: ``init.extremities``, the
+    feature points of ``map_automatic``)."""
+    S = _basis(template_basis, "template")
+    S.sample_distances(n_patches)
+    S.cached("extremities", lambda: dense.init.extremities(S))
+    return S.to_arrays()
+
+
 def _basis(arrays: dict, what: str) -> MeshBasis:
     return MeshBasis.from_arrays(arrays, source=f"corr.dense_basis of the {what}")
 
 
 @register("corr.dense_init", group="correspondence", fanout="item")
 def dense_init(template_basis, target_basis, template_mesh, target_mesh, landmarks, sparse_landmarks,
-               landmark_files=None, *, mode: str = "auto", k_init: int = 40, k_end: int = 100) -> dict:
+               landmark_files=None, *, mode: str = "auto", k_init: int = 40, k_end: int = 100,
+               hypotheses: int = 1) -> dict:
     """Initial map template -> target: a functional map refined by ZoomOut and the point map of the template
     samples. mode "sparse": from the sparse landmarks given on both meshes (a target without landmarks is
-    skipped: {"skipped": why}); "auto": from nothing on the target (extremities, orientation-aware).
+    skipped: {"skipped": why}); "auto": from nothing on the target (extremities, orientation-aware);
+    ``hypotheses`` > 1 (auto only) also keeps the next ranked maps, for ``corr.dense_refine`` to choose from
+    after refinement (``map_automatic``: 2 resolves a body whose front and back look alike).
 
-    Returns {"C": (k_end, k_end) float, "p2p_samples": (s,) int local target ids, "mode": str}.
+    Returns {"C": (k_end, k_end) float, "p2p_samples": (s,) int local target ids, "mode": str}, with
+    hypotheses > 1 also "C_more": (h, k_end, k_end) and "p2p_samples_more": (h, s) (the other hypotheses).
     """
     if mode not in ("sparse", "auto"):
         raise ValueError(f"corr.dense_init: mode must be 'sparse' or 'auto', got {mode!r}")
     S, T = _basis(template_basis, "template"), _basis(target_basis, "target")
+    if mode == "auto" and hypotheses > 1:
+        Cs, p2ps = dense.map_automatic(S, T, k_init=k_init, k_end=k_end, hypotheses=hypotheses)
+        return {"C": Cs[0], "p2p_samples": p2ps[0], "mode": mode, "C_more": np.asarray(Cs[1:]),
+                "p2p_samples_more": np.asarray(p2ps[1:])}
     if mode == "auto":
         C, p2p = dense.map_automatic(S, T, k_init=k_init, k_end=k_end)
         return {"C": C, "p2p_samples": p2p, "mode": mode}
@@ -74,19 +95,29 @@ def dense_init(template_basis, target_basis, template_mesh, target_mesh, landmar
 
 
 @register("corr.dense_refine", group="correspondence", fanout="item")
-def dense_refine(template_basis, target_basis, initial, *, refine: str = "extrinsic+spectral", n_patches: int = 300,
-                 patch_size: int = 64, rounds: int = 5, icp_iterations: int = 6) -> dict:
+def dense_refine(template_basis, target_basis, initial, *, refine: str = dense.DEFAULT_REFINE, n_patches: int = 300,
+                 patch_size: int = 64, rounds: int = 5, icp_iterations: int = 6, stiffness: float = 0.03) -> dict:
     """The dense map: the initial map upsampled to every template vertex (``upsample_spectral``), then refined
-    (``refine``: steps of ``refine.refine_map``; "extrinsic+spectral" = patch-wise rigid ICP then full-resolution
-    ZoomOut, as ``dense_map``; "extrinsic", "spectral", "none", ...). Returns {"vertex_map": (n_template,) int target vertex id (original ids;
-    -1 off the template's kept component)} or {"skipped": why}."""
+    (``refine``: steps of ``refine.refine_map``; "extrinsic+spectral+deform" = patch-wise rigid ICP, full-resolution
+    ZoomOut, ARAP registration, as ``dense_map``; "extrinsic", "spectral", "none", ...). ``n_patches`` ...
+    ``icp_iterations``: ``refine_extrinsic``'s; ``stiffness``: ``refine_deform``'s. Several initial hypotheses
+    (``corr.dense_init`` with hypotheses > 1): each is refined and the least distorted result kept
+    (``refine.refine_best``). Returns {"vertex_map": (n_template,) int target vertex id (original ids; -1 off the
+    template's kept component), "hypothesis": index of the kept initial map (0: the best ranked)} or
+    {"skipped": why}."""
     if "skipped" in initial:
         return {"skipped": initial["skipped"]}
     S, T = _basis(template_basis, "template"), _basis(target_basis, "target")
-    p2p = dense.upsample_spectral(S, T, np.asarray(initial["C"]), np.asarray(initial["p2p_samples"]))
+    starts = [(initial["C"], initial["p2p_samples"])]
+    if "C_more" in initial:
+        starts += list(zip(np.asarray(initial["C_more"]), np.asarray(initial["p2p_samples_more"])))
+    maps = [dense.upsample_spectral(S, T, np.asarray(C), np.asarray(p2p)) for C, p2p in starts]
     extrinsic = {"n_patches": n_patches, "patch_size": patch_size, "rounds": rounds, "icp_iterations": icp_iterations}
-    p2p = dense.refine_map(S, T, p2p, refine, {"extrinsic": extrinsic})
-    return {"vertex_map": map_to_original(S, T, p2p)}
+    options = {"extrinsic": extrinsic, "deform": {"stiffness": stiffness}}
+    if len(maps) == 1:
+        return {"vertex_map": map_to_original(S, T, dense.refine_map(S, T, maps[0], refine, options)), "hypothesis": 0}
+    p2p, kept, _ = dense.refine_best(S, T, maps, refine, options)
+    return {"vertex_map": map_to_original(S, T, p2p), "hypothesis": kept}
 
 
 def _given_maps(inputs: dict) -> dict:

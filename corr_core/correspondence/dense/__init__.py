@@ -8,7 +8,9 @@ Steps (each callable on its own; see the modules):
   3. ``refine.upsample_spectral`` (every template vertex), then pointwise steps below ZoomOut's floor:
      ``refine.refine_extrinsic`` (patch-wise rigid ICP: robust patch fits, normal-compatible nearest vertices
      anywhere on the target, so twisted or slid regions come back) then ``refine.refine_spectral``
-     (full-resolution ZoomOut with local candidates) by default; ``refine.refine_geodesic`` on request.
+     (full-resolution ZoomOut with local candidates) then ``deform.refine_deform`` (as-rigid-as-possible
+     registration of the template onto the target, read back as nearest vertices) by default;
+     ``refine.refine_geodesic`` on request.
   4. ``transfer.transfer_landmarks``; ``measures`` evaluates maps where ground truth exists.
 ``dense_map`` runs them in order. Convention: template = source; a map is (n_template,) int target vertex ids.
 Ids: points given by the user are original vertex ids; maps between the steps are in the bases' local ids (the
@@ -19,19 +21,22 @@ from __future__ import annotations
 import numpy as np
 
 from corr_core.correspondence.dense.basis import MeshBasis, map_to_original, mesh_basis
+from corr_core.correspondence.dense.deform import refine_deform
 from corr_core.correspondence.dense.init import map_automatic, map_from_points
-from corr_core.correspondence.dense.refine import (refine_extrinsic, refine_geodesic, refine_map, refine_spectral,
-                                                   upsample_spectral)
+from corr_core.correspondence.dense.refine import (DEFAULT_REFINE, map_distortion, refine_best, refine_extrinsic,
+                                                   refine_geodesic, refine_map, refine_spectral, upsample_spectral)
 from corr_core.correspondence.dense.transfer import transfer_landmarks
 
 __all__ = ["MeshBasis", "mesh_basis", "map_to_original", "dense_map", "map_from_points", "map_automatic", "upsample_spectral",
-           "refine_extrinsic", "refine_geodesic", "refine_map", "refine_spectral", "transfer_landmarks"]
+           "refine_extrinsic", "refine_geodesic", "refine_deform", "refine_map", "refine_spectral", "refine_best", "map_distortion", "DEFAULT_REFINE",
+           "transfer_landmarks"]
 
 
 def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarray, F_target: np.ndarray,
               landmarks_template=None, landmarks_target=None, *, k: int = 100, k_init: int = 40,
-              refine: str | None = "extrinsic+spectral", basis_template: MeshBasis | None = None,
-              basis_target: MeshBasis | None = None, refine_options: dict | None = None) -> np.ndarray:
+              refine: str | None = DEFAULT_REFINE, basis_template: MeshBasis | None = None,
+              basis_target: MeshBasis | None = None, refine_options: dict | None = None,
+              hypotheses: int = 1) -> np.ndarray:
     """Dense map template -> target.
 
     Args:
@@ -41,10 +46,14 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
             landmarks) or both None for the automatic map (no point needed on either mesh).
         k: final spectral basis size (ZoomOut end); k_init: size of the initial functional map.
         refine: pointwise steps after ZoomOut, applied in the order named (``refine.refine_map``):
-            "extrinsic+spectral" (default: ``refine_extrinsic`` then ``refine_spectral``), "extrinsic",
-            "spectral", "geodesic" (``refine_geodesic``), any of them joined by "+", or None.
+            "extrinsic+spectral+deform" (default: ``refine_extrinsic``, ``refine_spectral``, then
+            ``refine_deform``), "extrinsic", "spectral", "deform", "geodesic" (``refine_geodesic``), any of them
+            joined by "+", or None.
         basis_template, basis_target: precomputed ``mesh_basis`` results (reuse them across pairs).
-        refine_options: {"geodesic" | "extrinsic" | "spectral": kwargs} for the refinement functions.
+        refine_options: {step: kwargs} for the refinement functions (step: "extrinsic", "spectral", ...).
+        hypotheses: automatic mode only: how many ranked initial maps are refined; the least distorted refined
+            map is kept (``refine.refine_best``). 2 resolves the 180-degree turn of a body whose front and back
+            look alike, at the cost of a second ZoomOut and refinement.
     Returns:
         (n_s,) int64 target vertex id (original ids) of every template vertex; -1 for template vertices off the
         template's largest connected component (loose pieces, unused vertices: see ``basis``).
@@ -53,6 +62,10 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
         raise ValueError("give landmarks on both meshes (sparse mode) or on neither (automatic mode)")
     S = basis_template if basis_template is not None else mesh_basis(V_template, F_template, k=k, name="template")
     T = basis_target if basis_target is not None else mesh_basis(V_target, F_target, k=k, name="target")
+    if landmarks_template is None and int(hypotheses) > 1:
+        Cs, p2ps = map_automatic(S, T, k_init=k_init, k_end=k, hypotheses=hypotheses)
+        starts = [upsample_spectral(S, T, C, p) for C, p in zip(Cs, p2ps)]
+        return map_to_original(S, T, refine_best(S, T, starts, refine, refine_options)[0])
     if landmarks_template is None:
         C, p2p_samples = map_automatic(S, T, k_init=k_init, k_end=k)
     else:

@@ -53,6 +53,14 @@ class MeshBasis:
     n_full: int | None = None
     _solver: object = field(default=None, repr=False, compare=False)
     _sample_distances: np.ndarray | None = field(default=None, repr=False, compare=False)
+    _derived: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def cached(self, key, make):
+        """``make()`` computed once per basis and ``key`` (derived data a template reuses for every target, e.g.
+        its factorized ARAP operators or its extremities); not serialized."""
+        if key not in self._derived:
+            self._derived[key] = make()
+        return self._derived[key]
 
     @property
     def n(self) -> int:
@@ -113,10 +121,12 @@ class MeshBasis:
 
     def to_arrays(self) -> dict:
         """The basis as a plain dict of numpy arrays (``area`` and ``n_full`` as 0-d arrays; the template's cached
-        sample distances as ``sample_distances`` when computed). ``MeshBasis.from_arrays`` inverts it exactly."""
+        sample distances as ``sample_distances`` and its ``init.extremities`` as ``extremities`` when computed). ``MeshBasis.from_arrays`` inverts it exactly."""
         out = {key: np.asarray(getattr(self, key)) for key in self._ARRAY_KEYS}
         if self._sample_distances is not None:
             out["sample_distances"] = np.asarray(self._sample_distances)
+        if "extremities" in self._derived:
+            out["extremities"] = np.asarray(self._derived["extremities"])
         return out
 
     @classmethod
@@ -131,11 +141,14 @@ class MeshBasis:
                     vids=d["vids"], n_full=int(d["n_full"]))
         if "sample_distances" in arrays:
             basis._sample_distances = np.asarray(arrays["sample_distances"])
+        if "extremities" in arrays:
+            basis._derived["extremities"] = np.asarray(arrays["extremities"], dtype=np.int64)
         return basis
 
     def __getstate__(self):
         state = dict(self.__dict__)
         state["_solver"] = None
+        state["_derived"] = {}
         return state
 
 

@@ -277,7 +277,7 @@ def wks_disagreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarr
 def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarray | None = None,
                   points_target: np.ndarray | None = None, keep: int = 4, k_init: int = 40, k_probe: int = 60,
                   k_end: int = 100, step: int = 2, n_probe: int = 1000, orientation_neighbours: int = 64,
-                  return_info: bool = False):
+                  return_info: bool = False, hypotheses: int = 1):
     """A map with no point given on the target (module docstring).
 
     Args:
@@ -286,10 +286,18 @@ def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarra
             of each mesh; the chosen one then goes on to ``k_end`` as ``map_from_points`` does).
         orientation_neighbours: samples per local fit in ``orientation_agreement`` (a probe is coarser than the
             sample spacing, so the local fits need more than the nearest few samples).
-    Returns: (C, p2p_samples) as ``map_from_points``; with ``return_info`` also a dict (points, the chosen
-        assignment, every candidate's distortion, orientation agreement, WKS and HKS disagreement and probe map).
+        hypotheses: how many of the ranked candidates go on to ``k_end`` (``_ranked``: the chosen one first, then
+            the next in the same order). With 2 the true map and the 180-degree turn of a body whose front and
+            back look alike both come out, and ``refine.refine_best`` keeps the one that refines to the less
+            distorted map.
+    Returns: (C, p2p_samples) as ``map_from_points`` (hypotheses > 1: lists of them, best ranked first); with
+        ``return_info`` also a dict (points, the chosen assignment, every candidate's distortion, orientation
+        agreement, WKS and HKS disagreement and probe map).
     """
-    Ps = extremities(source) if points_source is None else source.to_local(points_source, what="template point")
+    if int(hypotheses) < 1:
+        raise ValueError(f"map_automatic: hypotheses must be >= 1, got {hypotheses}")
+    Ps = (source.cached("extremities", lambda: extremities(source)) if points_source is None
+          else source.to_local(points_source, what="template point"))
     Pt = extremities(target) if points_target is None else target.to_local(points_target, what="target point")
     Gs, Gt = source.distances(Ps), target.distances(Pt)          # (p, n_s), (q, n_t), reused per candidate
     Ds, Dt = 0.5 * (Gs[:, Ps] + Gs[:, Ps].T), 0.5 * (Gt[:, Pt] + Gt[:, Pt].T)
@@ -304,28 +312,32 @@ def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarra
         C, p2p = map_from_points(source, target, source.vids[Ps[s]], target.vids[Pt[t]], k_init=k_init,
                                  k_end=min(k_probe, k_end), step=5, features=(FS, FT), n_zoomout=n_probe,
                                  all_target_vertices=False)
-        info["candidates"].append({"source": s, "target": t, "distortion": cost, "map": (C, p2p),
-                                   "orientation": orientation_agreement(source, target, p2p,
-                                                                        neighbours=orientation_neighbours),
-                                   "chirality": chirality_agreement(source, p2p, FS[:, -n_pairs:], FT[:, -n_pairs:]),
-                                   "wks": wks_disagreement(source, target, p2p),
-                                   "hks": hks_disagreement(source, target, p2p)})
-    chosen = _choose(info["candidates"])
-    s, t = chosen["source"], chosen["target"]
+        candidate = {"source": s, "target": t, "distortion": cost, "map": (C, p2p),
+                     "chirality": chirality_agreement(source, p2p, FS[:, -n_pairs:], FT[:, -n_pairs:]),
+                     "wks": wks_disagreement(source, target, p2p)}
+        if return_info:                                          # reported only: not used by the choice
+            candidate["orientation"] = orientation_agreement(source, target, p2p, neighbours=orientation_neighbours)
+            candidate["hks"] = hks_disagreement(source, target, p2p)
+        info["candidates"].append(candidate)
+    ranked = _ranked(info["candidates"])[:int(hypotheses)]
+    s, t = ranked[0]["source"], ranked[0]["target"]
     info["chosen"] = (Ps[s], Pt[t])
-    C, p2p = chosen["map"]
-    C, p2p = _zoomout_and_match(source, target, C, k_end, step, 2000, True)
-    return (C, p2p, info) if return_info else (C, p2p)
+    maps = [_zoomout_and_match(source, target, c["map"][0], k_end, step, 2000, True) for c in ranked]
+    out = maps[0] if int(hypotheses) == 1 else ([C for C, _ in maps], [p2p for _, p2p in maps])
+    return (*out, info) if return_info else out
 
 
-def _choose(candidates: list[dict], keep_fraction: float = CHIRALITY_POOL) -> dict:
-    """The candidate whose WKS agrees best among those that keep the assigned points' orientation: chirality
-    agreement above ``keep_fraction`` of the best candidate's (and > 0).
+def _ranked(candidates: list[dict], keep_fraction: float = CHIRALITY_POOL) -> list[dict]:
+    """Candidates best first: those that keep the assigned points' orientation (chirality agreement above
+    ``keep_fraction`` of the best candidate's, and > 0) by increasing WKS disagreement, then the others by
+    decreasing chirality agreement.
 
     A mirror map's agreement is < 0; a map right on part of the body and mirrored elsewhere (only the hands or
     only the feet swapped: a twist) keeps a fraction of it (measured 0.35-0.65 of the best on the course poses
     and generated bodies); the true map and the orientation-preserving 180-degree turn keep all of it, and the
     descriptors decide between those two."""
     best = max(c["chirality"] for c in candidates)
-    pool = [c for c in candidates if c["chirality"] > keep_fraction * best] if best > 0 else []
-    return min(pool or [max(candidates, key=lambda c: c["chirality"])], key=lambda c: c["wks"])
+    in_pool = [best > 0 and c["chirality"] > keep_fraction * best for c in candidates]
+    pool = sorted((c for c, ok in zip(candidates, in_pool) if ok), key=lambda c: c["wks"])
+    rest = sorted((c for c, ok in zip(candidates, in_pool) if not ok), key=lambda c: -c["chirality"])
+    return pool + rest

@@ -264,14 +264,15 @@ def _assign(tree: cKDTree, target: MeshBasis, p2p: np.ndarray, moved: np.ndarray
     return cands[np.arange(len(p2p)), np.argmin(d, axis=1)]
 
 
-REFINE_STEPS = ("extrinsic", "spectral", "geodesic")      # refine_<step> of this module
+REFINE_STEPS = ("extrinsic", "spectral", "deform", "geodesic")   # refine_<step> (deform: the deform module)
+DEFAULT_REFINE = "extrinsic+spectral+deform"
 
 
-def refine_map(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, refine: str | None = "extrinsic+spectral",
+def refine_map(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, refine: str | None = DEFAULT_REFINE,
                options: dict | None = None) -> np.ndarray:
     """The pointwise refinements named by ``refine``, in its order: steps of ``REFINE_STEPS`` joined by "+"
-    (e.g. "extrinsic+spectral", the default of ``dense_map`` and of the ``corr.dense_refine`` stage), or None /
-    "none" for no step.
+    (``DEFAULT_REFINE`` "extrinsic+spectral+deform" is the default of ``dense_map`` and of the
+    ``corr.dense_refine`` stage), or None / "none" for no step.
 
     Args: source, target: bases; p2p: (n_s,) int current map (local ids); options: {step: kwargs of its function}.
     Returns: (n_s,) int refined map.
@@ -280,9 +281,48 @@ def refine_map(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, refine: st
     unknown = [n for n in names if n not in REFINE_STEPS]
     if unknown or (refine is not None and not isinstance(refine, str)):
         raise ValueError(f"refine must be None, 'none' or steps of {list(REFINE_STEPS)} joined by '+' (e.g. "
-                         f"'extrinsic+spectral'), got {refine!r}")
-    steps = {"extrinsic": refine_extrinsic, "spectral": refine_spectral, "geodesic": refine_geodesic}
+                         f"{DEFAULT_REFINE!r}), got {refine!r}")
+    from corr_core.correspondence.dense.deform import refine_deform
+
+    steps = {"extrinsic": refine_extrinsic, "spectral": refine_spectral, "deform": refine_deform,
+             "geodesic": refine_geodesic}
     options = options or {}
     for name in names:
         p2p = steps[name](source, target, p2p, **options.get(name, {}))
     return p2p
+
+
+def map_distortion(source: MeshBasis, target: MeshBasis, p2p: np.ndarray) -> float:
+    """How far a dense map is from a local similarity: the mean absolute deviation, from its median, of
+    log(|f(i) - f(j)| / |i - j|) over the template edges (i, j) whose ends go to different target vertices.
+
+    A near-isometric map keeps edge lengths up to one scale; a map that twists a limb (the 180-degree turn of a
+    body, forced to keep its feet pointing forward) shears it and scores higher. Args: p2p (n_s,) int local ids.
+    """
+    from corr_core.geometry.primitives import unique_edges
+
+    edges, _ = unique_edges(source.F)
+    p2p = np.asarray(p2p, dtype=np.int64)
+    length_s = np.linalg.norm(source.V[edges[:, 0]] - source.V[edges[:, 1]], axis=1)
+    length_t = np.linalg.norm(target.V[p2p[edges[:, 0]]] - target.V[p2p[edges[:, 1]]], axis=1)
+    kept = (length_t > 0) & (length_s > 0)
+    if not kept.any():
+        return float("inf")
+    log_ratio = np.log(length_t[kept] / length_s[kept])
+    return float(np.mean(np.abs(log_ratio - np.median(log_ratio))))
+
+
+def refine_best(source: MeshBasis, target: MeshBasis, maps: list, refine: str | None = DEFAULT_REFINE,
+                options: dict | None = None) -> tuple[np.ndarray, int, list[float]]:
+    """Refine each of several hypothesis maps (``refine_map``) and keep the least distorted result.
+
+    Args: maps: [(n_s,) int local ids], e.g. the upsampled maps of ``map_automatic(hypotheses=2)``.
+    Returns: (the kept refined map (n_s,) int, its index in ``maps``, ``map_distortion`` of every refined map).
+    Ties go to the earlier hypothesis (the better ranked one).
+    """
+    if not len(maps):
+        raise ValueError("refine_best: no hypothesis map given")
+    refined = [refine_map(source, target, m, refine, options) for m in maps]
+    scores = [map_distortion(source, target, m) for m in refined]
+    best = int(np.argmin(scores))
+    return refined[best], best, scores

@@ -161,3 +161,21 @@ def test_loose_pieces_and_unused_vertices_keep_original_ids(body):
     assert np.array_equal(dirty, clean + 1)
     with pytest.raises(ValueError, match="largest connected component"):
         _run(body, V_dirty, F_dirty, B_dirty, sparse_target=np.r_[sparse[:-1], len(V_t) + 1])
+
+
+def test_two_hypotheses_give_a_good_automatic_map_and_rank_the_turn_second(body):
+    """hypotheses=2 refines the two best ranked initial maps and keeps the less distorted one: on a pose of the
+    same body it is the right map, and the second hypothesis is the 180-degree turn (left and right swapped)."""
+    from corr_core.correspondence.dense import map_automatic
+
+    truth = np.arange(len(body["V"]))
+    p2p = _run(body, body["Vp"], body["F"], body["T"], hypotheses=2)
+    assert _mean_error(body["Vp"], body["F"], p2p, truth) < 0.03
+    assert _sides_kept(body, body["Vp"], body["F"], p2p, truth)
+    Cs, p2ps = map_automatic(body["S"], body["T"], k_init=K_INIT, k_end=K, hypotheses=2)
+    assert len(Cs) == len(p2ps) == 2 and Cs[0].shape == (K, K)
+    samples = body["S"].samples[:len(p2ps[1])]
+    far = np.linalg.norm(body["Vp"][p2ps[1]] - body["Vp"][samples], axis=1) > 0.1 * body["T"].scale
+    assert far.mean() > 0.5                                           # the other hypothesis is a different map
+    with pytest.raises(ValueError, match="hypotheses"):
+        map_automatic(body["S"], body["T"], hypotheses=0)

@@ -52,11 +52,11 @@ def test_chirality_agreement_is_positive_for_a_map_and_negative_for_its_mirror(e
     assert init.chirality_agreement(B, identity, chir, chir_m) < -0.99
 
 
-def test_choice_rejects_mirror_and_twisted_maps_then_takes_the_best_wks():
+def test_ranking_rejects_mirror_and_twisted_maps_then_takes_the_best_wks():
     cands = [{"name": "mirror", "chirality": -0.8, "wks": 0.010},
              {"name": "twist", "chirality": 0.45, "wks": 0.020},
              {"name": "true", "chirality": 0.80, "wks": 0.030},
              {"name": "turn", "chirality": 0.78, "wks": 0.035}]
-    assert init._choose(cands)["name"] == "true"
+    assert [c["name"] for c in init._ranked(cands)] == ["true", "turn", "twist", "mirror"]
     all_negative = [dict(c, chirality=-abs(c["chirality"]) - 0.1) for c in cands]   # twist: -0.55, the highest
-    assert init._choose(all_negative)["name"] == "twist"              # the one that keeps the orientation most
+    assert init._ranked(all_negative)[0]["name"] == "twist"           # the one that keeps the orientation most

@@ -7,17 +7,8 @@ from scipy.spatial import cKDTree
 
 from corr_core.correspondence.dense import measures, mesh_basis, refine_extrinsic
 from corr_core.correspondence.dense.refine import _nearest_compatible
-from corr_core.generate import humanoid
 
 FAST = {"n_patches": 120, "rounds": 5}
-
-
-@pytest.fixture(scope="module")
-def pair():
-    V, F = humanoid.make_humanoid_rest(grid_step=0.045)
-    W, _ = humanoid.skinning_weights(V, F)
-    Vp = humanoid.pose_mesh(V, W, humanoid.random_pose(np.random.default_rng(5)))
-    return mesh_basis(V, F, k=20, n_samples=600), mesh_basis(Vp, F, k=20, n_samples=600)
 
 
 def _slid_region(S, T, offset_edges: float = 5.0):
@@ -78,3 +69,34 @@ def test_refine_map_runs_the_named_steps_in_order_and_rejects_unknown_ones(pair)
     assert np.array_equal(refine_map(S, T, p2p, None), p2p) and np.array_equal(refine_map(S, T, p2p, "none"), p2p)
     with pytest.raises(ValueError, match="refine must be"):
         refine_map(S, T, p2p, "extrinsic+smooth")
+
+
+def _turned_map(S, T):
+    """Each template vertex -> the target vertex nearest its position turned 180 degrees about the vertical axis
+    through the target's centre (left <-> right and front <-> back: the orientation-preserving near-symmetry of a
+    body); with T a posed copy of S this is the wrong hypothesis map_automatic can rank first."""
+    c = T.V.mean(axis=0)
+    turned = (T.V - c) * np.array([-1.0, 1.0, -1.0]) + c
+    return cKDTree(T.V).query(turned)[1]
+
+
+def test_map_distortion_is_zero_for_a_similarity_and_higher_for_the_turn(pair):
+    from corr_core.correspondence.dense import map_distortion
+
+    S, T = pair
+    scaled = mesh_basis(2.5 * S.V, S.F, k=10, n_samples=200)
+    assert map_distortion(S, scaled, np.arange(S.n)) == pytest.approx(0.0, abs=1e-12)
+    assert map_distortion(S, T, _turned_map(S, T)) > 1.2 * map_distortion(S, T, np.arange(S.n))
+
+
+def test_refine_best_keeps_the_less_distorted_hypothesis_whatever_its_rank(pair):
+    from corr_core.correspondence.dense import map_distortion, refine_best
+
+    S, T = pair
+    truth, turned = np.arange(S.n), _turned_map(S, T)
+    for maps, right in (([turned, truth], 1), ([truth, turned], 0)):
+        kept, index, scores = refine_best(S, T, maps, refine=None)
+        assert index == right and np.array_equal(kept, maps[right])
+        assert scores == [map_distortion(S, T, m) for m in maps]
+    with pytest.raises(ValueError, match="no hypothesis"):
+        refine_best(S, T, [])

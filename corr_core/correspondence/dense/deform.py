@@ -1,0 +1,188 @@
+"""Non-rigid registration of the template onto the target (as-rigid-as-possible), read back as a point map.
+
+``refine_deform`` deforms the template surface X (starting at the current images of its vertices) by
+alternating the two steps of ARAP (Sorkine & Alexa 2007): best local rotations of every vertex's edge fan, then
+one sparse linear solve for X that keeps the edges close to the rotated template edges while a data term pulls
+every vertex toward (a) its current image (the map so far; pairs far off the median are dropped as wrong) and
+(b) the tangent plane of its nearest target vertex whose normal agrees (closest-point, point-to-plane, as in
+non-rigid ICP; a touching body part faces the other way and is ignored). The data weight per vertex is its
+area over (``stiffness`` sqrt(area))^2: detail smaller than about ``stiffness`` follows the target, motion on
+larger scales follows the template's shape, so a vertex cannot slide away from its neighbours the way a
+nearest-vertex step (``refine_extrinsic``) or a truncated spectral basis (``refine_spectral``) lets it. Each
+template vertex finally takes the nearest normal-compatible target vertex to its deformed position.
+
+Units: positions in the meshes' units; ``stiffness`` in units of sqrt(template area).
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+from scipy.spatial import cKDTree
+
+from corr_core.correspondence.dense.basis import MeshBasis
+from corr_core.correspondence.dense.refine import _nearest_compatible
+from corr_core.geometry.primitives import face_cross, vertex_normals
+
+
+def arap_operators(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, sp.csr_matrix, np.ndarray]:
+    """Edges, weights and matrices of the ARAP energy of a mesh.
+
+    Args: V: (n,3) float; F: (m,3) int.
+    Returns: edges (e,2) int (i < j, the couplings of the cotan Laplacian), weights (e,) float >= 0 (cotan
+        weights, negative ones clipped: they make the energy indefinite), stiffness (n,n) sparse graph Laplacian
+        of those weights, mass (n,) float vertex areas (units of V squared).
+    """
+    from corr_core.geometry.laplacian import laplacian_and_mass
+
+    L, M = laplacian_and_mass(V, F)
+    L = sp.triu(L, k=1).tocoo()
+    edges = np.column_stack([L.row, L.col]).astype(np.int64)
+    weights = np.maximum(-L.data, 0.0)
+    n = len(V)
+    W = sp.coo_matrix((np.r_[weights, weights], (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
+                      shape=(n, n)).tocsr()
+    K = (sp.diags(np.asarray(W.sum(axis=1)).ravel()) - W).tocsr()
+    return edges, weights, K, M.diagonal().copy()
+
+
+def _incidence(edges: np.ndarray, n: int) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """(n, e) unsigned (both ends +1) and signed (i: +1, j: -1) edge incidence matrices."""
+    e = len(edges)
+    rows = np.r_[edges[:, 0], edges[:, 1]]
+    cols = np.r_[np.arange(e), np.arange(e)]
+    unsigned = sp.csr_matrix((np.ones(2 * e), (rows, cols)), shape=(n, e))
+    signed = sp.csr_matrix((np.r_[np.ones(e), -np.ones(e)], (rows, cols)), shape=(n, e))
+    return unsigned, signed
+
+
+def _fan_rotations(E0: np.ndarray, E1: np.ndarray, weights: np.ndarray, unsigned: sp.csr_matrix,
+                   squarings: int = 8) -> np.ndarray:
+    """Best rotation of every vertex's edge fan: R_i = argmin sum_j w_ij |e1_ij - R e0_ij|^2 over rotations.
+
+    Horn's quaternion form (1987): the optimal rotation is the top eigenvector of a symmetric 4x4 matrix built
+    from the fan's covariance, found here by repeated squaring of that matrix (shifted to be positive definite)
+    -- batched 4x4 products, a third of the time of numpy's batched 3x3 SVD, always a proper rotation. Where the
+    top two eigenvalues (nearly) tie the rotation is ill-defined and either answer is as good for ARAP.
+
+    Args: E0, E1: (e,3) template and deformed edge vectors; weights (e,); unsigned (n,e) incidence.
+    Returns: (n,3,3) rotations (det +1).
+    """
+    outer = (weights[:, None, None] * E0[:, :, None] * E1[:, None, :]).reshape(-1, 9)
+    S = np.asarray(unsigned @ outer).reshape(-1, 3, 3)                 # sum over each vertex's edges
+    (xx, xy, xz), (yx, yy, yz), (zx, zy, zz) = S[:, 0].T, S[:, 1].T, S[:, 2].T
+    N = np.stack([np.stack([xx + yy + zz, yz - zy, zx - xz, xy - yx], -1),
+                  np.stack([yz - zy, xx - yy - zz, xy + yx, zx + xz], -1),
+                  np.stack([zx - xz, xy + yx, -xx + yy - zz, yz + zy], -1),
+                  np.stack([xy - yx, zx + xz, yz + zy, -xx - yy + zz], -1)], axis=1)
+    bound = np.sqrt(3.0) * np.linalg.norm(S.reshape(-1, 9), axis=1) + 1e-300     # >= |every eigenvalue of N|
+    M = N / bound[:, None, None] + np.eye(4)                            # positive semi-definite, same eigenvectors
+    for _ in range(squarings):
+        M = M @ M
+        M /= np.maximum(np.trace(M, axis1=1, axis2=2), 1e-300)[:, None, None]
+    q = M @ np.array([1.0, 1e-3, 2e-3, 3e-3])                          # fixed start: deterministic
+    w, x, y, z = (q / np.maximum(np.linalg.norm(q, axis=1, keepdims=True), 1e-300)).T
+    return np.stack([np.stack([w*w + x*x - y*y - z*z, 2 * (x*y - w*z), 2 * (x*z + w*y)], -1),
+                     np.stack([2 * (x*y + w*z), w*w - x*x + y*y - z*z, 2 * (y*z - w*x)], -1),
+                     np.stack([2 * (x*z - w*y), 2 * (y*z + w*x), w*w - x*x - y*y + z*z], -1)], axis=1)
+
+
+class TemplateARAP:
+    """The template's ARAP operators at one stiffness, factorized once and reused for every target.
+
+    V: (n,3) float, F: (m,3) int template; stiffness: units of sqrt(area); area: the template's surface area
+    (default: the sum of its vertex areas).
+    """
+
+    def __init__(self, V: np.ndarray, F: np.ndarray, stiffness: float, area: float | None = None):
+        self.F = np.asarray(F)
+        self.edges, self.weights, K, mass = arap_operators(V, F)
+        self.unsigned, self.signed = _incidence(self.edges, len(V))
+        area = float(mass.sum()) if area is None else float(area)
+        self.lam = mass / (stiffness**2 * area)                          # data weight per vertex
+        self.solve = splu(sp.csc_matrix(K + sp.diags(self.lam))).solve
+        self.E0 = V[self.edges[:, 0]] - V[self.edges[:, 1]]
+        m = len(self.F)                                                  # vertex-face incidence, for normals
+        self._vertex_faces = sp.csr_matrix((np.ones(3 * m), (self.F.T.ravel(), np.tile(np.arange(m), 3))),
+                                           shape=(len(V), m))
+
+    def normals(self, X: np.ndarray) -> np.ndarray:
+        """(n,3) unit area-weighted vertex normals of the template deformed to X (n,3)
+        (``primitives.vertex_normals``, summed by one sparse product)."""
+        N = self._vertex_faces @ face_cross(X, self.F)
+        return N / np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-300)
+
+    def register(self, target: "_Target", anchors: np.ndarray, iterations: int, anchor_weight: float,
+                 outlier: float, normal_cos: float) -> np.ndarray:
+        """One registration from the anchors (n,3) (the current images): ``iterations`` local (fan rotations) /
+        global (one factorized solve per coordinate) steps. Returns the deformed template (n,3)."""
+        i, j = self.edges[:, 0], self.edges[:, 1]
+        X = anchors.copy()
+        for it in range(iterations):
+            R = _fan_rotations(self.E0, X[i] - X[j], self.weights, self.unsigned)
+            rhs = self.signed @ (0.5 * self.weights[:, None] * np.einsum("bij,bj->bi", R[i] + R[j], self.E0))
+            goal = anchors if it == 0 else target.data_goal(X, self.normals(X), anchors, anchor_weight, outlier,
+                                                            normal_cos)
+            X = np.column_stack([self.solve(rhs[:, c] + self.lam * goal[:, c]) for c in range(3)])
+        return X
+
+
+class _Target:
+    """The target's positions (n_t,3), normals and k-d tree, for the data term and the read-back."""
+
+    def __init__(self, basis: MeshBasis):
+        self.V = basis.V
+        self.normals = vertex_normals(basis.V, basis.F)
+        self.tree = cKDTree(basis.V)
+
+    def data_goal(self, X: np.ndarray, normals_X: np.ndarray, anchors: np.ndarray, anchor_weight: float,
+                  outlier: float, normal_cos: float) -> np.ndarray:
+        """Where the data term pulls each deformed vertex X (n,3) (normals (n,3)): a blend of its anchor (current image), its
+        projection on the tangent plane of its nearest compatible target vertex, and itself (no pull) for the
+        share neither applies to. Returns (n,3)."""
+        _, q = self.tree.query(X)
+        N = self.normals[q]
+        compatible = np.einsum("ij,ij->i", normals_X, N) > normal_cos
+        on_plane = X - np.einsum("ij,ij->i", X - self.V[q], N)[:, None] * N
+        r = np.linalg.norm(X - anchors, axis=1)
+        w_anchor = np.where(r <= outlier * np.median(r) + 1e-12, anchor_weight, 0.0)
+        w_plane = np.where(compatible, 1.0 - w_anchor, 0.0)
+        w_self = 1.0 - w_anchor - w_plane
+        return w_anchor[:, None] * anchors + w_plane[:, None] * on_plane + w_self[:, None] * X
+
+    def nearest_vertices(self, X: np.ndarray, normals_X: np.ndarray, fallback: np.ndarray, k: int = 8) -> np.ndarray:
+        """Nearest target vertex to each deformed vertex X (n,3) (normals (n,3)) among its ``k`` nearest whose
+        normal faces the same side (cosine > 0); ``fallback`` (n,) int where none does."""
+        ids, d = _nearest_compatible(self.tree, self.normals, X, normals_X, 0.0, k=k)
+        return np.where(np.isfinite(d), ids, fallback)
+
+
+def refine_deform(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, stiffness: float = 0.03,
+                  iterations: int = 3, rounds: int = 10, anchor_weight: float = 0.5, outlier: float = 3.0,
+                  normal_cos: float = 0.5) -> np.ndarray:
+    """ARAP registration of the template onto the target from the current map (module docstring).
+
+    Args:
+        source, target: bases; p2p: (n_s,) int current map (local ids).
+        stiffness: length (units sqrt(template area)) below which the data term wins over ARAP.
+        iterations: rotation / solve steps per round.
+        rounds: registrations; each starts from the map the previous one read back (its images become the new
+            anchors), so a region the anchors held back moves on; stops early when the map no longer changes.
+        anchor_weight: share of the data term that pulls a vertex to its current image (the rest pulls it to the
+            target surface); images farther than ``outlier`` x the median from the deformed vertex get none.
+        normal_cos: closest-point pairs need the deformed normal and the target normal at a cosine above this.
+    Returns: (n_s,) int refined map. The template's factorized operators are cached on ``source``.
+    """
+    if not stiffness > 0 or int(iterations) < 1 or int(rounds) < 1 or not 0 <= anchor_weight <= 1:
+        raise ValueError(f"refine_deform: need stiffness > 0, iterations >= 1, rounds >= 1 and 0 <= anchor_weight "
+                         f"<= 1, got {stiffness}, {iterations}, {rounds}, {anchor_weight}")
+    p2p = np.asarray(p2p, dtype=np.int64)
+    arap = source.cached(("arap", float(stiffness)), lambda: TemplateARAP(source.V, source.F, stiffness, source.area))
+    tgt = _Target(target)
+    for _ in range(int(rounds)):
+        X = arap.register(tgt, target.V[p2p], int(iterations), anchor_weight, outlier, normal_cos)
+        new = tgt.nearest_vertices(X, arap.normals(X), p2p)
+        if np.array_equal(new, p2p):
+            break
+        p2p = new
+    return p2p
