@@ -33,18 +33,15 @@ import os
 import sys
 import time
 
-# One BLAS/OpenMP thread for every method, set before numpy is imported when run as a script: CPU seconds
-# (process_time) then count the work, not idle threads spinning on a shared machine (main() also caps an
-# already loaded BLAS; importing this module leaves the environment alone).
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from bench._env import SCAPE as DEFAULT_DATA, one_blas_thread  # noqa: E402
+
+# One BLAS/OpenMP thread for every method, set before numpy is imported when run as a script (main() also caps
+# an already loaded BLAS; importing this module leaves the environment alone).
 if __name__ == "__main__":
-    for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[_var] = "1"
+    one_blas_thread()
 
 import numpy as np  # noqa: E402
-
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-DEFAULT_DATA = os.path.join(os.path.dirname(ROOT), "shared", "data", "hw3", "scape")
 METHODS = ("pyfm_none", "pyfm_5pts", "dense_sparse", "dense_auto")
 
 

@@ -14,15 +14,14 @@ import glob
 import os
 import sys
 
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from bench._env import SCAPE as DEFAULT_DATA, one_blas_thread  # noqa: E402
+
 if __name__ == "__main__":
-    for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[_var] = "1"
+    one_blas_thread()
 
 import numpy as np  # noqa: E402
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-DEFAULT_DATA = os.path.join(os.path.dirname(ROOT), "shared", "data", "hw3", "scape")
 STEPS = ("extrinsic", "spectral", "deform")
 
 
