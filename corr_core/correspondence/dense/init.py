@@ -18,7 +18,9 @@ hands or only the feet swapped), so the probes are scored afterwards: ``chiralit
 chirality functions vs the target's at the probe images: < 0 for a mirror map, a fraction for a twist) keeps the
 candidates above 2/3 of the best one's, and among those the map whose wave kernel signatures agree best wins
 (``wks_disagreement``, on the template's energy bands, scale-normalized: the front of a body differs from its
-back in the face, chest and feet). The winner goes on with ZoomOut to ``k_end``. ``orientation_agreement``
+back in the face, chest and feet). The winner goes on with ZoomOut to ``k_end`` (``hypotheses=N``: the N best
+ranked do, and ``refine.refine_best`` decides after refinement: for bodies whose front and back look alike, where
+the WKS difference between the true map and the turn is a few percent either way). ``orientation_agreement``
 (local linear fits) and ``hks_disagreement`` are reported in ``return_info`` but not used: on coarse probes the
 first is noise, and the second (low-pass) misses the front/back differences (measured on the course poses).
 """

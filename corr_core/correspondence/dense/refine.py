@@ -20,7 +20,11 @@ samples) and their current images on the target; compute geodesic distances from
 (heat method); move every template vertex to the target vertex, among the ``n_candidates`` nearest (in 3D) to
 its current image, whose distances to the images of its ``n_near`` nearest anchors best match its own distances
 to those anchors (least squares) -- a local trilateration for (near-)isometric pairs; on request only (it was
-worse than ``refine_extrinsic`` on SCAPE).
+worse than ``refine_extrinsic`` on SCAPE). The third default step, ``deform.refine_deform`` (ARAP registration),
+lives in its own module; ``refine_map`` runs any of them in order.
+
+``refine_best`` refines several hypothesis maps (``init.map_automatic(hypotheses=N)``) and keeps the one whose
+refined map is least distorted (``map_distortion``).
 """
 from __future__ import annotations
 
