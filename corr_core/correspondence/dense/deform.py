@@ -62,7 +62,7 @@ def _fan_rotations(E0: np.ndarray, E1: np.ndarray, weights: np.ndarray, unsigned
 
     Horn's quaternion form (1987): the optimal rotation is the top eigenvector of a symmetric 4x4 matrix built
     from the fan's covariance, found here by repeated squaring of that matrix (shifted to be positive definite)
-    -- batched 4x4 products, a third of the time of numpy's batched 3x3 SVD, always a proper rotation. Where the
+    -- batched 4x4 products, faster than numpy's batched 3x3 SVD here, always a proper rotation. Where the
     top two eigenvalues (nearly) tie the rotation is ill-defined and either answer is as good for ARAP.
 
     Args: E0, E1: (e,3) template and deformed edge vectors; weights (e,); unsigned (n,e) incidence.
