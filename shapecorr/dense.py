@@ -2,7 +2,8 @@
 
 Per mesh (cached, shared by both methods): ``corr.dense_basis`` (Laplace-Beltrami eigenpairs, vertex areas,
 farthest-point samples; ``corr_core.correspondence.dense.mesh_basis``) as plain arrays.
-Once: ``corr.dense_template`` -- the template's basis with its patch-centre geodesics (for every refinement task).
+Once: ``corr.dense_template`` -- the template's basis with its patch-centre geodesics and extremities (for every
+target's tasks).
 Per test mesh: ``corr.dense_init`` -- the initial map, ``mode`` "sparse" (the 5 sparse landmarks given on both
 meshes: ``dense_sparse``) or "auto" (nothing given on the target: ``dense_auto``); ``corr.dense_refine`` -- the
 full-resolution map and its pointwise refinement (its own stage: changing its params reruns only it and the
@@ -54,7 +55,7 @@ def dense_template(template_basis, *, n_patches: int = 300) -> dict:
     feature points of ``map_automatic``)."""
     S = _basis(template_basis, "template")
     S.sample_distances(n_patches)
-    S.cached("extremities", lambda: dense.init.extremities(S))
+    dense.init.cached_extremities(S)
     return S.to_arrays()
 
 
@@ -70,7 +71,7 @@ def dense_init(template_basis, target_basis, template_mesh, target_mesh, landmar
     samples. mode "sparse": from the sparse landmarks given on both meshes (a target without landmarks is
     skipped: {"skipped": why}); "auto": from nothing on the target (extremities, orientation-aware);
     ``hypotheses`` > 1 (auto only) also keeps the next ranked maps, for ``corr.dense_refine`` to choose from
-    after refinement (``map_automatic``: 2 resolves a body whose front and back look alike).
+    after refinement (``automatic_hypotheses``: 2 resolves a body whose front and back look alike).
 
     Returns {"C": (k_end, k_end) float, "p2p_samples": (s,) int local target ids, "mode": str}, with
     hypotheses > 1 also "C_more": (h, k_end, k_end) and "p2p_samples_more": (h, s) (the other hypotheses).
@@ -78,13 +79,12 @@ def dense_init(template_basis, target_basis, template_mesh, target_mesh, landmar
     if mode not in ("sparse", "auto"):
         raise ValueError(f"corr.dense_init: mode must be 'sparse' or 'auto', got {mode!r}")
     S, T = _basis(template_basis, "template"), _basis(target_basis, "target")
-    if mode == "auto" and hypotheses > 1:
-        Cs, p2ps = dense.map_automatic(S, T, k_init=k_init, k_end=k_end, hypotheses=hypotheses)
-        return {"C": Cs[0], "p2p_samples": p2ps[0], "mode": mode, "C_more": np.asarray(Cs[1:]),
-                "p2p_samples_more": np.asarray(p2ps[1:])}
     if mode == "auto":
-        C, p2p = dense.map_automatic(S, T, k_init=k_init, k_end=k_end)
-        return {"C": C, "p2p_samples": p2p, "mode": mode}
+        (C, p2p), *more = dense.automatic_hypotheses(S, T, hypotheses, k_init=k_init, k_end=k_end)
+        out = {"C": C, "p2p_samples": p2p, "mode": mode}
+        if more:
+            out.update(C_more=np.asarray([c for c, _ in more]), p2p_samples_more=np.asarray([p for _, p in more]))
+        return out
     target_ids, source = mesh_landmarks(target_mesh, landmarks, landmark_files, template_mesh)
     if target_ids is None:
         return {"skipped": f"{source} (dense_sparse needs the sparse landmarks on the target)"}
@@ -114,8 +114,6 @@ def dense_refine(template_basis, target_basis, initial, *, refine: str = dense.D
     maps = [dense.upsample_spectral(S, T, np.asarray(C), np.asarray(p2p)) for C, p2p in starts]
     extrinsic = {"n_patches": n_patches, "patch_size": patch_size, "rounds": rounds, "icp_iterations": icp_iterations}
     options = {"extrinsic": extrinsic, "deform": {"stiffness": stiffness}}
-    if len(maps) == 1:
-        return {"vertex_map": map_to_original(S, T, dense.refine_map(S, T, maps[0], refine, options)), "hypothesis": 0}
     p2p, kept, _ = dense.refine_best(S, T, maps, refine, options)
     return {"vertex_map": map_to_original(S, T, p2p), "hypothesis": kept}
 

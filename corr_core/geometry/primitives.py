@@ -38,9 +38,8 @@ def vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     outward). Vertices on no face get a zero normal."""
     V = np.asarray(V, dtype=np.float64)
     fn = face_cross(V, F)
-    N = np.zeros_like(V)
-    for c in range(3):
-        np.add.at(N, F[:, c], fn)
+    corners = np.asarray(F).T.ravel()           # every face's first corner, then second, then third
+    N = np.column_stack([np.bincount(corners, weights=np.tile(fn[:, c], 3), minlength=len(V)) for c in range(3)])
     return N / np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-300)
 
 

@@ -22,14 +22,14 @@ import numpy as np
 
 from corr_core.correspondence.dense.basis import MeshBasis, map_to_original, mesh_basis
 from corr_core.correspondence.dense.deform import refine_deform
-from corr_core.correspondence.dense.init import map_automatic, map_from_points
+from corr_core.correspondence.dense.init import automatic_hypotheses, map_automatic, map_from_points
 from corr_core.correspondence.dense.refine import (DEFAULT_REFINE, map_distortion, refine_best, refine_extrinsic,
                                                    refine_geodesic, refine_map, refine_spectral, upsample_spectral)
 from corr_core.correspondence.dense.transfer import transfer_landmarks
 
-__all__ = ["MeshBasis", "mesh_basis", "map_to_original", "dense_map", "map_from_points", "map_automatic", "upsample_spectral",
-           "refine_extrinsic", "refine_geodesic", "refine_deform", "refine_map", "refine_spectral", "refine_best", "map_distortion", "DEFAULT_REFINE",
-           "transfer_landmarks"]
+__all__ = ["MeshBasis", "mesh_basis", "map_to_original", "dense_map", "map_from_points", "map_automatic",
+           "automatic_hypotheses", "upsample_spectral", "refine_extrinsic", "refine_geodesic", "refine_deform",
+           "refine_map", "refine_spectral", "refine_best", "map_distortion", "DEFAULT_REFINE", "transfer_landmarks"]
 
 
 def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarray, F_target: np.ndarray,
@@ -51,9 +51,9 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
             joined by "+", or None.
         basis_template, basis_target: precomputed ``mesh_basis`` results (reuse them across pairs).
         refine_options: {step: kwargs} for the refinement functions (step: "extrinsic", "spectral", ...).
-        hypotheses: automatic mode only: how many ranked initial maps are refined; the least distorted refined
-            map is kept (``refine.refine_best``). 2 resolves the 180-degree turn of a body whose front and back
-            look alike, at the cost of a second ZoomOut and refinement.
+        hypotheses: automatic mode only: how many ranked initial maps are refined (``init.automatic_hypotheses``);
+            the least distorted refined map is kept (``refine.refine_best``). 2 resolves the 180-degree turn of a
+            body whose front and back look alike, at the cost of a second ZoomOut and refinement.
     Returns:
         (n_s,) int64 target vertex id (original ids) of every template vertex; -1 for template vertices off the
         template's largest connected component (loose pieces, unused vertices: see ``basis``).
@@ -62,18 +62,14 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
         raise ValueError("give landmarks on both meshes (sparse mode) or on neither (automatic mode)")
     S = basis_template if basis_template is not None else mesh_basis(V_template, F_template, k=k, name="template")
     T = basis_target if basis_target is not None else mesh_basis(V_target, F_target, k=k, name="target")
-    if landmarks_template is None and int(hypotheses) > 1:
-        Cs, p2ps = map_automatic(S, T, k_init=k_init, k_end=k, hypotheses=hypotheses)
-        starts = [upsample_spectral(S, T, C, p) for C, p in zip(Cs, p2ps)]
-        return map_to_original(S, T, refine_best(S, T, starts, refine, refine_options)[0])
     if landmarks_template is None:
-        C, p2p_samples = map_automatic(S, T, k_init=k_init, k_end=k)
+        starts = automatic_hypotheses(S, T, hypotheses, k_init=k_init, k_end=k)
     else:
         ls = np.asarray(landmarks_template, dtype=np.int64)
         lt = np.asarray(landmarks_target, dtype=np.int64)
         if ls.shape != lt.shape or ls.ndim != 1 or len(ls) < 3:
             raise ValueError(f"landmarks must be two (L,) id lists of equal length L >= 3, got {ls.shape} and "
                              f"{lt.shape}")
-        C, p2p_samples = map_from_points(S, T, ls, lt, k_init=k_init, k_end=k)
-    p2p = refine_map(S, T, upsample_spectral(S, T, C, p2p_samples), refine, refine_options)
-    return map_to_original(S, T, p2p)
+        starts = [map_from_points(S, T, ls, lt, k_init=k_init, k_end=k)]
+    maps = [upsample_spectral(S, T, C, p2p_samples) for C, p2p_samples in starts]
+    return map_to_original(S, T, refine_best(S, T, maps, refine, refine_options)[0])

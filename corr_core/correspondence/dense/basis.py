@@ -121,7 +121,8 @@ class MeshBasis:
 
     def to_arrays(self) -> dict:
         """The basis as a plain dict of numpy arrays (``area`` and ``n_full`` as 0-d arrays; the template's cached
-        sample distances as ``sample_distances`` and its ``init.extremities`` as ``extremities`` when computed). ``MeshBasis.from_arrays`` inverts it exactly."""
+        sample distances as ``sample_distances`` and its ``init.extremities`` as ``extremities`` when computed).
+        ``MeshBasis.from_arrays`` inverts it exactly."""
         out = {key: np.asarray(getattr(self, key)) for key in self._ARRAY_KEYS}
         if self._sample_distances is not None:
             out["sample_distances"] = np.asarray(self._sample_distances)

@@ -22,7 +22,7 @@ from scipy.spatial import cKDTree
 
 from corr_core.correspondence.dense.basis import MeshBasis
 from corr_core.correspondence.dense.refine import _nearest_compatible
-from corr_core.geometry.primitives import face_cross, vertex_normals
+from corr_core.geometry.primitives import vertex_normals
 
 
 def arap_operators(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, sp.csr_matrix, np.ndarray]:
@@ -102,15 +102,6 @@ class TemplateARAP:
         self.lam = mass / (stiffness**2 * area)                          # data weight per vertex
         self.solve = splu(sp.csc_matrix(K + sp.diags(self.lam))).solve
         self.E0 = V[self.edges[:, 0]] - V[self.edges[:, 1]]
-        m = len(self.F)                                                  # vertex-face incidence, for normals
-        self._vertex_faces = sp.csr_matrix((np.ones(3 * m), (self.F.T.ravel(), np.tile(np.arange(m), 3))),
-                                           shape=(len(V), m))
-
-    def normals(self, X: np.ndarray) -> np.ndarray:
-        """(n,3) unit area-weighted vertex normals of the template deformed to X (n,3)
-        (``primitives.vertex_normals``, summed by one sparse product)."""
-        N = self._vertex_faces @ face_cross(X, self.F)
-        return N / np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-300)
 
     def register(self, target: "_Target", anchors: np.ndarray, iterations: int, anchor_weight: float,
                  outlier: float, normal_cos: float) -> np.ndarray:
@@ -121,8 +112,8 @@ class TemplateARAP:
         for it in range(iterations):
             R = _fan_rotations(self.E0, X[i] - X[j], self.weights, self.unsigned)
             rhs = self.signed @ (0.5 * self.weights[:, None] * np.einsum("bij,bj->bi", R[i] + R[j], self.E0))
-            goal = anchors if it == 0 else target.data_goal(X, self.normals(X), anchors, anchor_weight, outlier,
-                                                            normal_cos)
+            goal = (anchors if it == 0 else
+                    target.data_goal(X, vertex_normals(X, self.F), anchors, anchor_weight, outlier, normal_cos))
             X = np.column_stack([self.solve(rhs[:, c] + self.lam * goal[:, c]) for c in range(3)])
         return X
 
@@ -137,9 +128,9 @@ class _Target:
 
     def data_goal(self, X: np.ndarray, normals_X: np.ndarray, anchors: np.ndarray, anchor_weight: float,
                   outlier: float, normal_cos: float) -> np.ndarray:
-        """Where the data term pulls each deformed vertex X (n,3) (normals (n,3)): a blend of its anchor (current image), its
-        projection on the tangent plane of its nearest compatible target vertex, and itself (no pull) for the
-        share neither applies to. Returns (n,3)."""
+        """Where the data term pulls each deformed vertex X (n,3) (normals (n,3)): a blend of its anchor (current
+        image), its projection on the tangent plane of its nearest compatible target vertex, and itself (no pull)
+        for the share neither applies to. Returns (n,3)."""
         _, q = self.tree.query(X)
         N = self.normals[q]
         compatible = np.einsum("ij,ij->i", normals_X, N) > normal_cos
@@ -181,7 +172,7 @@ def refine_deform(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, stiffne
     tgt = _Target(target)
     for _ in range(int(rounds)):
         X = arap.register(tgt, target.V[p2p], int(iterations), anchor_weight, outlier, normal_cos)
-        new = tgt.nearest_vertices(X, arap.normals(X), p2p)
+        new = tgt.nearest_vertices(X, vertex_normals(X, source.F), p2p)
         if np.array_equal(new, p2p):
             break
         p2p = new

@@ -18,8 +18,8 @@ hands or only the feet swapped), so the probes are scored afterwards: ``chiralit
 chirality functions vs the target's at the probe images: < 0 for a mirror map, a fraction for a twist) keeps the
 candidates above 2/3 of the best one's, and among those the map whose wave kernel signatures agree best wins
 (``wks_disagreement``, on the template's energy bands, scale-normalized: the front of a body differs from its
-back in the face, chest and feet). The winner goes on with ZoomOut to ``k_end`` (``hypotheses=N``: the N best
-ranked do, and ``refine.refine_best`` decides after refinement: for bodies whose front and back look alike, where
+back in the face, chest and feet). The winner goes on with ZoomOut to ``k_end`` (``automatic_hypotheses``: the
+N best ranked do, and ``refine.refine_best`` decides after refinement: for bodies whose front and back look alike, where
 the WKS difference between the true map and the turn is a few percent either way). ``orientation_agreement``
 (local linear fits) and ``hks_disagreement`` are reported in ``return_info`` but not used: on coarse probes the
 first is noise, and the second (low-pass) misses the front/back differences (measured on the course poses).
@@ -276,11 +276,18 @@ def wks_disagreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarr
     return float(np.mean(np.abs(ws - wt) / np.maximum(ws + wt, 1e-300)))
 
 
+def cached_extremities(basis: MeshBasis) -> np.ndarray:
+    """``extremities(basis)`` computed once per basis (``MeshBasis.cached``; a template reuses them for every
+    target, and ``to_arrays`` keeps them): (p,) int local ids."""
+    return basis.cached("extremities", lambda: extremities(basis))
+
+
 def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarray | None = None,
                   points_target: np.ndarray | None = None, keep: int = 4, k_init: int = 40, k_probe: int = 60,
                   k_end: int = 100, step: int = 2, n_probe: int = 1000, orientation_neighbours: int = 64,
-                  return_info: bool = False, hypotheses: int = 1):
-    """A map with no point given on the target (module docstring).
+                  return_info: bool = False):
+    """A map with no point given on the target (module docstring): the best ranked of
+    ``automatic_hypotheses``.
 
     Args:
         points_source, points_target: feature points of each mesh, original ids (default ``extremities`` of each).
@@ -288,17 +295,29 @@ def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarra
             of each mesh; the chosen one then goes on to ``k_end`` as ``map_from_points`` does).
         orientation_neighbours: samples per local fit in ``orientation_agreement`` (a probe is coarser than the
             sample spacing, so the local fits need more than the nearest few samples).
-        hypotheses: how many of the ranked candidates go on to ``k_end`` (``_ranked``: the chosen one first, then
-            the next in the same order). With 2 the true map and the 180-degree turn of a body whose front and
-            back look alike both come out, and ``refine.refine_best`` keeps the one that refines to the less
-            distorted map.
-    Returns: (C, p2p_samples) as ``map_from_points`` (hypotheses > 1: lists of them, best ranked first); with
-        ``return_info`` also a dict (points, the chosen assignment, every candidate's distortion, orientation
-        agreement, WKS and HKS disagreement and probe map).
+    Returns: (C, p2p_samples) as ``map_from_points``; with ``return_info`` also a dict (points, the chosen
+        assignment, every candidate's distortion, orientation agreement, WKS and HKS disagreement and probe map).
     """
-    if int(hypotheses) < 1:
-        raise ValueError(f"map_automatic: hypotheses must be >= 1, got {hypotheses}")
-    Ps = (source.cached("extremities", lambda: extremities(source)) if points_source is None
+    out = automatic_hypotheses(source, target, 1, points_source, points_target, keep=keep, k_init=k_init,
+                               k_probe=k_probe, k_end=k_end, step=step, n_probe=n_probe,
+                               orientation_neighbours=orientation_neighbours, return_info=return_info)
+    return (*out[0][0], out[1]) if return_info else out[0]
+
+
+def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int = 2, points_source: np.ndarray | None = None,
+                         points_target: np.ndarray | None = None, keep: int = 4, k_init: int = 40,
+                         k_probe: int = 60, k_end: int = 100, step: int = 2, n_probe: int = 1000,
+                         orientation_neighbours: int = 64, return_info: bool = False):
+    """The ``n`` best ranked automatic maps (``_ranked``: ``map_automatic``'s choice first, then the next in the
+    same order), each taken on to ``k_end``. With n = 2 the true map and the 180-degree turn of a body whose front
+    and back look alike both come out, and ``refine.refine_best`` keeps the one that refines to the less
+    distorted map. Arguments as ``map_automatic``.
+
+    Returns: [(C, p2p_samples)] (at most n, best ranked first); with ``return_info`` also ``map_automatic``'s dict.
+    """
+    if int(n) < 1:
+        raise ValueError(f"automatic_hypotheses: n must be >= 1, got {n}")
+    Ps = (cached_extremities(source) if points_source is None
           else source.to_local(points_source, what="template point"))
     Pt = extremities(target) if points_target is None else target.to_local(points_target, what="target point")
     Gs, Gt = source.distances(Ps), target.distances(Pt)          # (p, n_s), (q, n_t), reused per candidate
@@ -321,12 +340,11 @@ def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarra
             candidate["orientation"] = orientation_agreement(source, target, p2p, neighbours=orientation_neighbours)
             candidate["hks"] = hks_disagreement(source, target, p2p)
         info["candidates"].append(candidate)
-    ranked = _ranked(info["candidates"])[:int(hypotheses)]
+    ranked = _ranked(info["candidates"])[:int(n)]
     s, t = ranked[0]["source"], ranked[0]["target"]
     info["chosen"] = (Ps[s], Pt[t])
     maps = [_zoomout_and_match(source, target, c["map"][0], k_end, step, 2000, True) for c in ranked]
-    out = maps[0] if int(hypotheses) == 1 else ([C for C, _ in maps], [p2p for _, p2p in maps])
-    return (*out, info) if return_info else out
+    return (maps, info) if return_info else maps
 
 
 def _ranked(candidates: list[dict], keep_fraction: float = CHIRALITY_POOL) -> list[dict]:

@@ -23,7 +23,7 @@ to those anchors (least squares) -- a local trilateration for (near-)isometric p
 worse than ``refine_extrinsic`` on SCAPE). The third default step, ``deform.refine_deform`` (ARAP registration),
 lives in its own module; ``refine_map`` runs any of them in order.
 
-``refine_best`` refines several hypothesis maps (``init.map_automatic(hypotheses=N)``) and keeps the one whose
+``refine_best`` refines several hypothesis maps (``init.automatic_hypotheses``) and keeps the one whose
 refined map is least distorted (``map_distortion``).
 """
 from __future__ import annotations
@@ -320,7 +320,7 @@ def refine_best(source: MeshBasis, target: MeshBasis, maps: list, refine: str | 
                 options: dict | None = None) -> tuple[np.ndarray, int, list[float]]:
     """Refine each of several hypothesis maps (``refine_map``) and keep the least distorted result.
 
-    Args: maps: [(n_s,) int local ids], e.g. the upsampled maps of ``map_automatic(hypotheses=2)``.
+    Args: maps: [(n_s,) int local ids], e.g. the upsampled maps of ``init.automatic_hypotheses``.
     Returns: (the kept refined map (n_s,) int, its index in ``maps``, ``map_distortion`` of every refined map).
     Ties go to the earlier hypothesis (the better ranked one).
     """

@@ -166,16 +166,19 @@ def test_loose_pieces_and_unused_vertices_keep_original_ids(body):
 def test_two_hypotheses_give_a_good_automatic_map_and_rank_the_turn_second(body):
     """hypotheses=2 refines the two best ranked initial maps and keeps the less distorted one: on a pose of the
     same body it is the right map, and the second hypothesis is the 180-degree turn (left and right swapped)."""
-    from corr_core.correspondence.dense import map_automatic
+    from corr_core.correspondence.dense import automatic_hypotheses, map_automatic
 
     truth = np.arange(len(body["V"]))
     p2p = _run(body, body["Vp"], body["F"], body["T"], hypotheses=2)
     assert _mean_error(body["Vp"], body["F"], p2p, truth) < 0.03
     assert _sides_kept(body, body["Vp"], body["F"], p2p, truth)
-    Cs, p2ps = map_automatic(body["S"], body["T"], k_init=K_INIT, k_end=K, hypotheses=2)
+    maps = automatic_hypotheses(body["S"], body["T"], 2, k_init=K_INIT, k_end=K)
+    (Cs, p2ps) = zip(*maps)
     assert len(Cs) == len(p2ps) == 2 and Cs[0].shape == (K, K)
+    first = map_automatic(body["S"], body["T"], k_init=K_INIT, k_end=K)        # map_automatic's is the first
+    assert np.array_equal(first[0], Cs[0]) and np.array_equal(first[1], p2ps[0])
     samples = body["S"].samples[:len(p2ps[1])]
     far = np.linalg.norm(body["Vp"][p2ps[1]] - body["Vp"][samples], axis=1) > 0.1 * body["T"].scale
     assert far.mean() > 0.5                                           # the other hypothesis is a different map
-    with pytest.raises(ValueError, match="hypotheses"):
-        map_automatic(body["S"], body["T"], hypotheses=0)
+    with pytest.raises(ValueError, match="n must be >= 1"):
+        automatic_hypotheses(body["S"], body["T"], 0)
