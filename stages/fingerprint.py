@@ -1,28 +1,60 @@
-"""Code fingerprints: a hash of a function's AST and of the project functions it uses.
+"""Code fingerprints: a hash of a function's AST and of the project code it can run.
 
-Comments, docstrings and formatting do not change a fingerprint; a change to the function or to any
-project function, class or module constant it reaches (transitively) does. "Project" is the function's own
-module plus the packages the caller names (the plugins declare them, see ``registry.fingerprint_packages``);
-other code is not followed: it is pinned by the package versions recorded in each run's provenance.
+Comments, docstrings and formatting do not change a fingerprint; a change to the function or to any project
+function, class, module constant or module-level statement it reaches (transitively) does. "Project" is the
+function's own module plus the packages the caller names (the plugins declare them, see
+``registry.fingerprint_packages``); other code is not followed: it is pinned by the package versions recorded
+in each run's provenance.
+
+What counts as "reached" (each is a part, named in ``code_fingerprint``'s second result and in the reasons
+``status`` prints):
+
+* a name of the module's namespace, of a closure, or bound by an import *inside* the function body
+  (``import m``, ``from m import f``, relative ``from .m import f``);
+* an attribute chain through project modules and classes: ``mod.func``, ``mod.CONST``, ``mod.Class.method``
+  (a class counts with its whole body, so every method of a class a stage instantiates is in);
+* names in default argument values and in decorators (other than the stage function's own registration);
+* the functions held in a constant (a dispatch table ``{"a": step_a}``, a ``functools.partial``);
+* any other module-level value (an instance, a compiled pattern, a computed table): the module statements that
+  assign it, and what they reach.
+
+When a reference into the project cannot be resolved statically (a project module used as a value, an object
+with no assignment statement), the whole module's source is the part (``module:NAME``): a spurious rerun is
+acceptable, a stale hit is not. ``stages.audit`` checks the result by observation: every project function that
+actually executes while a task runs must be covered by one of its parts.
 """
 from __future__ import annotations
 
 import ast
+import functools
 import hashlib
+import importlib
+import importlib.util
 import inspect
 import os
+import sys
 import textwrap
 import types
 from typing import Any
 
 
+def _module_name(obj: Any) -> str | None:
+    """The name of the module that defines ``obj`` (or of ``obj`` itself when it is a module)."""
+    mod = obj.__name__ if isinstance(obj, types.ModuleType) else getattr(obj, "__module__", None)
+    return mod if isinstance(mod, str) and mod else None
+
+
+def _in_project(module: str | None, project: frozenset) -> bool:
+    """True when the dotted module name is one of the ``project`` modules or packages, or inside one."""
+    if not module:
+        return False
+    parts = module.split(".")
+    return any(".".join(parts[:i]) in project for i in range(1, len(parts) + 1))
+
+
 def _is_project(obj: Any, project: frozenset) -> bool:
     """True when ``obj`` (a module, function or class) lives in one of the ``project`` modules or packages."""
-    mod = getattr(obj, "__module__", None) if not isinstance(obj, types.ModuleType) else obj.__name__
-    if not isinstance(mod, str) or not mod:
-        return False
-    parts = mod.split(".")
-    return any(".".join(parts[:i]) in project for i in range(1, len(parts) + 1))
+    return _in_project(_module_name(obj), project)
 
 
 def _strip_docstrings(tree: ast.AST) -> ast.AST:
@@ -35,8 +67,10 @@ def _strip_docstrings(tree: ast.AST) -> ast.AST:
     return tree
 
 
-_MEMO: dict[int, tuple[Any, str, frozenset]] = {}
+_MEMO: dict[Any, tuple[Any, str, frozenset]] = {}
 _DISK: dict = {"path": None, "table": {}, "dirty": False}
+# bump when what a part means changes, so that digests cached on disk by an older engine are not reused
+_TABLE_VERSION = "2"
 
 
 def use_disk_cache(path: str) -> None:
@@ -63,112 +97,373 @@ def save_disk_cache() -> None:
         _DISK["dirty"] = False
 
 
+def _file_stamp(path: str | None) -> str | None:
+    """``path:size:mtime_ns`` of a source file (None when it cannot be read)."""
+    try:
+        st = os.stat(path)
+        return f"{path}:{st.st_size}:{st.st_mtime_ns}"
+    except (TypeError, OSError):
+        return None
+
+
 def _disk_key(obj: Any) -> str | None:
     try:
-        path = inspect.getsourcefile(obj)
-        st = os.stat(path)
+        stamp = _file_stamp(inspect.getsourcefile(obj))
         line = obj.__code__.co_firstlineno if hasattr(obj, "__code__") else ""
-        return f"{path}:{st.st_size}:{st.st_mtime_ns}:{obj.__module__}.{obj.__qualname__}:{line}"
+        return stamp and f"v{_TABLE_VERSION}:{stamp}:{obj.__module__}.{obj.__qualname__}:{line}"
     except (TypeError, OSError, AttributeError):
         return None
 
 
-def _digest_and_refs(obj: Any) -> tuple[str, frozenset]:
-    """(AST digest, dotted names it references) of a function or class, memoized per object and on disk."""
-    hit = _MEMO.get(id(obj))
-    if hit is not None and hit[0] is obj:
+def _memoized(memo_key: Any, disk_key: str | None, compute) -> tuple[str, frozenset]:
+    """(digest, refs) from the process memo, the on-disk table or ``compute()`` (then stored in both).
+
+    refs are tuples: a dotted name chain ('np', 'linalg', 'norm'), or ('import', alias, module, attr) for a
+    binding made by an import statement inside the code (attr '' for ``import module``)."""
+    hit = _MEMO.get(memo_key)
+    if hit is not None:
         return hit[1], hit[2]
-    key = _disk_key(obj) if _DISK["path"] else None
-    if key is not None and key in _DISK["table"]:
-        digest, refs_list = _DISK["table"][key]
+    if disk_key is not None and _DISK["path"] and disk_key in _DISK["table"]:
+        digest, refs_list = _DISK["table"][disk_key]
         refs = frozenset(tuple(r) for r in refs_list)
     else:
-        digest, tree = _ast_digest(obj)
-        refs = frozenset(_referenced_names(tree)) if tree is not None else frozenset()
-        if key is not None:
-            _DISK["table"][key] = [digest, sorted(refs)]
+        digest, refs = compute()
+        if disk_key is not None and _DISK["path"]:
+            _DISK["table"][disk_key] = [digest, sorted(refs)]
             _DISK["dirty"] = True
-    _MEMO[id(obj)] = (obj, digest, refs)
+    _MEMO[memo_key] = (None, digest, refs)
     return digest, refs
 
 
+def _digest_and_refs(obj: Any) -> tuple[str, frozenset]:
+    """(AST digest, references) of a function or class, memoized per object and on disk."""
+    hit = _MEMO.get(id(obj))
+    if hit is not None and hit[0] is obj:
+        return hit[1], hit[2]
+    key = _disk_key(obj)
+
+    def compute():
+        digest, tree = _ast_digest(obj)
+        return digest, (frozenset(_references(tree, _package_of(obj))) if tree is not None else frozenset())
+
+    digest, refs = _memoized(("obj", key), key, compute) if key else compute()
+    _MEMO[id(obj)] = (obj, digest, refs)  # holds obj, so its id is not reused while the entry lives
+    return digest, refs
+
+
+def _hash_tree(tree: ast.AST) -> str:
+    return hashlib.blake2b(ast.dump(tree, include_attributes=False).encode(), digest_size=16).hexdigest()
+
+
 def _ast_digest(obj: Any) -> tuple[str, ast.AST | None]:
+    """Digest of ``obj``'s source without docstrings and without the decorators of the object itself (its
+    registration is wiring, not computation); the tree returned keeps those decorators, so that a project
+    decorator's code is followed."""
     try:
         src = textwrap.dedent(inspect.getsource(obj))
         tree = _strip_docstrings(ast.parse(src))
-        # decorators are wiring, not computation (the registered name is part of the key anyway)
-        for node in ast.walk(tree):
+        undecorated = ast.parse(src)
+        _strip_docstrings(undecorated)
+        for node in ast.walk(undecorated):
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
                 node.decorator_list = []
                 break
-        return hashlib.blake2b(ast.dump(tree, include_attributes=False).encode(), digest_size=16).hexdigest(), tree
+        return _hash_tree(undecorated), tree
     except (OSError, TypeError, SyntaxError):
         return hashlib.blake2b(repr(getattr(obj, "__code__", obj)).encode(), digest_size=16).hexdigest(), None
 
 
-def _referenced_names(tree: ast.AST) -> set[tuple[str, ...]]:
-    """Dotted name chains loaded in ``tree``: ``np.linalg.norm`` -> ('np','linalg','norm')."""
-    chains: set[tuple[str, ...]] = set()
-    for node in ast.walk(tree):
+def _package_of(obj: Any) -> str:
+    """The package relative imports inside ``obj`` are resolved against."""
+    module = sys.modules.get(_module_name(obj) or "")
+    return getattr(module, "__package__", None) or (_module_name(obj) or "").rpartition(".")[0]
+
+
+def _references(tree: ast.AST, package: str) -> set[tuple[str, ...]]:
+    """Maximal dotted name chains loaded in ``tree`` (``np.linalg.norm`` -> ('np','linalg','norm'), not also
+    ('np',)), plus one ('import', alias, module, attr) per name an import statement in ``tree`` binds."""
+    refs: set[tuple[str, ...]] = set()
+    inner: set[int] = set()
+    for node in ast.walk(tree):  # breadth first: an outer attribute is met before the chain inside it
         if isinstance(node, ast.Attribute):
+            if id(node) in inner:
+                continue
             parts, cur = [], node
             while isinstance(cur, ast.Attribute):
+                inner.add(id(cur))
                 parts.append(cur.attr)
                 cur = cur.value
             if isinstance(cur, ast.Name):
-                chains.add(tuple([cur.id] + parts[::-1]))
-        elif isinstance(node, ast.Name):
-            chains.add((node.id,))
-    return chains
+                inner.add(id(cur))
+                refs.add(tuple([cur.id] + parts[::-1]))
+        elif isinstance(node, ast.Name) and id(node) not in inner:
+            refs.add((node.id,))
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.asname:
+                    refs.add(("import", alias.asname, alias.name, ""))
+                else:  # ``import a.b.c`` imports a.b.c and binds ``a``
+                    refs.add(("import", alias.name.split(".")[0], alias.name, "^"))
+        elif isinstance(node, ast.ImportFrom):
+            base = "." * node.level + (node.module or "")
+            try:
+                module = importlib.util.resolve_name(base, package) if node.level else base
+            except (ImportError, ValueError):
+                module = base
+            for alias in node.names:
+                if alias.name != "*":
+                    refs.add(("import", alias.asname or alias.name, module, alias.name))
+    return refs
 
 
-def _resolve(chain: tuple[str, ...], namespace: dict, project: frozenset) -> list[tuple[str, Any]]:
-    """Project objects reached by a dotted name chain, with their qualified names."""
+def _import_binding(module: str, attr: str, project: frozenset) -> Any:
+    """The object an import statement binds: a module, or ``attr`` of it (itself a submodule when no such
+    attribute exists), or with attr "^" the top package of ``module`` (``import a.b`` binds ``a``). Only
+    project modules are imported here; others resolve to None (not followed)."""
+    if attr == "^":
+        if not _in_project(module, project):
+            return None
+        try:
+            importlib.import_module(module)
+        except Exception:  # noqa: BLE001 - the task itself will report the failing import
+            return _Unresolved(module)
+        return sys.modules[module.split(".")[0]]
+    target = f"{module}.{attr}" if attr else module
+    if not _in_project(module, project) and not _in_project(target, project):
+        return None
+    try:
+        mod = importlib.import_module(module)
+    except Exception:  # noqa: BLE001 - the task itself will report the failing import
+        return _Unresolved(module)
+    if not attr:
+        return mod
+    if hasattr(mod, attr):
+        return getattr(mod, attr)
+    try:
+        return importlib.import_module(target)
+    except Exception:  # noqa: BLE001
+        return _Unresolved(module)
+
+
+class _Unresolved:
+    """A project reference that could not be followed: the whole module stands for it."""
+
+    def __init__(self, module: str):
+        self.module = module
+
+
+def _module_tree(name: str) -> tuple[str | None, ast.Module | None]:
+    """(file stamp, parsed source) of module ``name``; (None, None) when it has no readable source."""
+    module = sys.modules.get(name)
+    try:
+        path = inspect.getsourcefile(module)
+        with open(path, encoding="utf-8") as f:
+            return _file_stamp(path), ast.parse(f.read())
+    except (TypeError, OSError, SyntaxError, ValueError):
+        return None, None
+
+
+def _module_digest(name: str) -> str:
+    """Digest of a whole module's source (docstrings and comments excluded)."""
+    stamp = _file_stamp(getattr(sys.modules.get(name), "__file__", None))
+
+    def compute():
+        _, tree = _module_tree(name)
+        if tree is None:
+            return hashlib.blake2b(f"unreadable:{name}".encode(), digest_size=16).hexdigest(), frozenset()
+        return _hash_tree(_strip_docstrings(tree)), frozenset()
+
+    return _memoized(("module", name, stamp), stamp and f"v{_TABLE_VERSION}:{stamp}:module:{name}", compute)[0]
+
+
+def _assigning_statements(tree: ast.Module, name: str) -> list[ast.stmt]:
+    """The top-level statements of a module that bind ``name`` (assignments, augmented assignments, loops,
+    with-blocks and conditionals that contain one)."""
+    found = []
+    for stmt in tree.body:
+        if isinstance(stmt, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef, ast.Import, ast.ImportFrom)):
+            continue
+        for node in ast.walk(stmt):
+            targets = node.targets if isinstance(node, ast.Assign) else \
+                [node.target] if isinstance(node, (ast.AnnAssign, ast.AugAssign, ast.For, ast.NamedExpr)) else []
+            if any(isinstance(t, ast.Name) and t.id == name for tgt in targets for t in ast.walk(tgt)):
+                found.append(stmt)
+                break
+    return found
+
+
+def _statement_digest_and_refs(module: str, name: str, package: str) -> tuple[str, frozenset] | None:
+    """(digest, references) of the module statements that assign ``name``; None when there is none."""
+    stamp = _file_stamp(getattr(sys.modules.get(module), "__file__", None))
+
+    def compute():
+        _, tree = _module_tree(module)
+        stmts = _assigning_statements(tree, name) if tree is not None else []
+        if not stmts:
+            return "", frozenset()
+        block = ast.Module(body=stmts, type_ignores=[])
+        return _hash_tree(block), frozenset(_references(block, package))
+
+    digest, refs = _memoized(("stmt", module, name, stamp), stamp and f"v{_TABLE_VERSION}:{stamp}:stmt:{module}.{name}",
+                             compute)
+    return (digest, refs) if digest else None
+
+
+_SCALARS = (int, float, complex, str, bytes, bool, type(None))
+
+
+def _is_value_constant(obj: Any) -> bool:
+    """An immutable constant written by its repr: a scalar, or a tuple / frozenset of such values and of
+    functions and classes (held by name). Mutable containers are read from their statements instead: their
+    content may change at run time (a module-level cache), their statement does not."""
+    if isinstance(obj, _SCALARS):
+        return True
+    if isinstance(obj, (tuple, frozenset)):
+        return all(_is_value_constant(v) or inspect.isfunction(v) or inspect.isclass(v) for v in obj)
+    return False
+
+
+def _resolve(chain: tuple[str, ...], namespace: dict, home: str, project: frozenset) -> list[tuple[str, Any]]:
+    """Project parts reached by a dotted name chain looked up in ``namespace`` (the globals of module ``home``,
+    with closure and import bindings), as (part name, object) pairs.
+
+    Part names: ``mod.qualname`` (a function or class), ``const:mod.NAME`` (an immutable value, by its repr),
+    ``stmt:mod.NAME`` (the statements assigning any other module-level value), ``module:mod`` (a whole module)."""
     if chain[0] not in namespace:
         return []
-    obj, found = namespace[chain[0]], []
+    obj, owner, attr_name = namespace[chain[0]], home, chain[0]
     for attr in chain[1:] + (None,):
+        obj = _unwrapped(obj)
+        if isinstance(obj, _Unresolved):
+            return [(f"module:{obj.module}", obj.module)]
         if isinstance(obj, types.ModuleType):
-            if attr is None or not _is_project(obj, project):
-                break
-            if not hasattr(obj, attr):
-                break
-            obj = getattr(obj, attr)
+            if not _is_project(obj, project):
+                return []
+            if attr is None:  # a project module used as a value (getattr(mod, name), passed on): all of it
+                return [(f"module:{obj.__name__}", obj.__name__)]
+            value = getattr(obj, attr) if hasattr(obj, attr) else _import_binding(obj.__name__, attr, project)
+            if value is None or isinstance(value, _Unresolved):
+                return [(f"module:{obj.__name__}", obj.__name__)]
+            obj, owner, attr_name = value, obj.__name__, attr
             continue
-        if _is_project(obj, project) and (inspect.isfunction(obj) or inspect.isclass(obj)):
-            found.append((f"{obj.__module__}.{obj.__qualname__}", obj))
-        elif isinstance(obj, (int, float, str, bytes, bool, tuple, frozenset, list, dict)) and len(chain) == 1:
-            found.append((f"const:{chain[0]}", obj))
-        break
-    return found
+        if inspect.isfunction(obj) or inspect.isclass(obj):
+            return [(f"{obj.__module__}.{obj.__qualname__}", obj)] if _is_project(obj, project) else []
+        if _is_value_constant(obj):
+            return [(f"const:{owner}.{attr_name}", obj)] if _in_project(owner, project) else []
+        if _in_project(owner, project):  # any other value bound at module level in the project
+            return [(f"stmt:{owner}.{attr_name}", (owner, attr_name, obj))]
+        if _is_project(type(obj), project):  # an instance of a project class held elsewhere
+            cls = type(obj)
+            return [(f"{cls.__module__}.{cls.__qualname__}", cls)]
+        return []
+    return []
+
+
+def _unwrapped(obj: Any) -> Any:
+    """The function or class a decorator wrapped (``functools.lru_cache``, ``functools.wraps``), else ``obj``:
+    the wrapper is not project code, what it calls is."""
+    if isinstance(obj, types.ModuleType) or inspect.isfunction(obj) or inspect.isclass(obj):
+        return obj
+    try:
+        if getattr(obj, "__wrapped__", None) is None:
+            return obj
+        inner = inspect.unwrap(obj)
+    except Exception:  # noqa: BLE001 - an object whose attributes cannot be read is left as it is
+        return obj
+    return inner if inspect.isfunction(inner) or inspect.isclass(inner) else obj
+
+
+def _imported_name(tree: ast.Module, name: str, package: str) -> tuple[str, str] | None:
+    """(module, attribute) when a top-level ``from module import attribute [as name]`` binds ``name``."""
+    for stmt in tree.body:
+        if isinstance(stmt, ast.ImportFrom):
+            base = "." * stmt.level + (stmt.module or "")
+            try:
+                module = importlib.util.resolve_name(base, package) if stmt.level else base
+            except (ImportError, ValueError):
+                continue
+            for alias in stmt.names:
+                if (alias.asname or alias.name) == name:
+                    return module, alias.name
+    return None
+
+
+def _statement_parts(module: str, name: str, value: Any, project: frozenset) -> tuple[str | None, list]:
+    """(digest, parts to follow) of a module-level value that is neither a function, a class nor an immutable
+    constant: the statements of ``module`` that assign ``name`` and what they reach; for a name the module
+    imports, the same in the module it comes from; otherwise (no statement) the whole module when the value's
+    class is a project class, else nothing (a third-party object: pinned by package versions)."""
+    package = getattr(sys.modules.get(module), "__package__", None) or module.rpartition(".")[0]
+    found = _statement_digest_and_refs(module, name, package)
+    if found is not None:
+        digest, refs = found
+        namespace = dict(getattr(sys.modules.get(module), "__dict__", {}))
+        _bind_imports(namespace, refs, project)
+        follow = [p for chain in refs if chain[0] != "import" for p in _resolve(chain, namespace, module, project)]
+        return digest, follow
+    _, tree = _module_tree(module)
+    origin = _imported_name(tree, name, package) if tree is not None else None
+    if origin is not None and _in_project(origin[0], project):
+        return "import", [(f"stmt:{origin[0]}.{origin[1]}", (origin[0], origin[1], value))]
+    cls = type(value)
+    if _is_project(cls, project):
+        return "instance", [(f"{cls.__module__}.{cls.__qualname__}", cls), (f"module:{module}", module)]
+    return None, []
+
+
+def _bind_imports(namespace: dict, refs: frozenset, project: frozenset) -> None:
+    """Add to ``namespace`` the project objects that the import statements among ``refs`` bind."""
+    for ref in refs:
+        if ref[0] == "import" and len(ref) == 4:
+            bound = _import_binding(ref[2], ref[3], project)
+            if bound is not None:
+                namespace[ref[1]] = bound
 
 
 def _constant_repr(obj: Any, held: list) -> str:
     """``repr`` of a constant that is the same in every process: a function or class inside it (a dispatch table
-    such as ``{"a": step_a}``) is written by its qualified name, not by its address, and appended to ``held`` as
-    (qualified name, object) so that its code is fingerprinted too."""
+    such as ``{"a": step_a}``, a ``functools.partial``) is written by its qualified name, not by its address,
+    and appended to ``held`` as (qualified name, object) so that its code is fingerprinted too."""
     if inspect.isfunction(obj) or inspect.isclass(obj):
         name = f"{obj.__module__}.{obj.__qualname__}"
         held.append((name, obj))
         return f"<{name}>"
+    if isinstance(obj, functools.partial):
+        return (f"partial({_constant_repr(obj.func, held)}, {_constant_repr(obj.args, held)}, "
+                f"{_constant_repr(dict(sorted(obj.keywords.items())), held)})")
     if isinstance(obj, dict):
         return "{" + ", ".join(f"{_constant_repr(k, held)}: {_constant_repr(v, held)}" for k, v in obj.items()) + "}"
     if isinstance(obj, (list, tuple)):
         return type(obj).__name__ + "(" + ", ".join(_constant_repr(v, held) for v in obj) + ")"
-    if isinstance(obj, frozenset):
-        return "frozenset(" + ", ".join(sorted(_constant_repr(v, held) for v in obj)) + ")"
+    if isinstance(obj, (frozenset, set)):
+        return type(obj).__name__ + "(" + ", ".join(sorted(_constant_repr(v, held) for v in obj)) + ")"
     return repr(obj)
 
 
+def _namespace(obj: Any, refs: frozenset, project: frozenset) -> dict:
+    """The names ``obj``'s code sees: its module's globals, its closure and the bindings of the imports inside
+    it (project modules only)."""
+    namespace = dict(getattr(inspect.getmodule(obj), "__dict__", {}))
+    if inspect.isfunction(obj) and obj.__closure__:
+        for name, cell in zip(obj.__code__.co_freevars, obj.__closure__):
+            try:
+                namespace[name] = cell.cell_contents
+            except ValueError:  # an empty cell (a name assigned later)
+                pass
+    _bind_imports(namespace, refs, project)
+    return namespace
+
+
 def code_fingerprint(func: Any, packages: tuple[str, ...] | frozenset = ()) -> tuple[str, dict[str, str]]:
-    """Fingerprint ``func`` and every project function/class/constant it reaches.
+    """Fingerprint ``func`` and every project function, class, constant and module statement it reaches.
 
     "Project" means ``packages`` (package or module names, e.g. ``("mylib", "myapp")``) plus the
     module that defines ``func`` (so helpers next to a plugin's stage function are tracked too).
 
     Returns:
         digest: one hex string over everything reached.
-        parts: {qualified name: hex digest} of each reached project object (for "why will this rerun").
+        parts: {part name: hex digest} of each reached project object (for "why will this rerun"); part
+            names are described in :func:`_resolve`.
     """
     func = inspect.unwrap(func)
     project = frozenset(packages) | {func.__module__}
@@ -181,21 +476,27 @@ def code_fingerprint(func: Any, packages: tuple[str, ...] | frozenset = ()) -> t
         if qual.startswith("const:"):
             held: list[tuple[str, Any]] = []
             text = _constant_repr(obj, held)
-            # plain constants keep repr(obj), so existing cache keys stay valid
+            # plain constants keep repr(obj), so their digest does not depend on how they are written
             parts[qual] = hashlib.blake2b((text if held else repr(obj)).encode(), digest_size=8).hexdigest()
             stack.extend((name, f) for name, f in held if _is_project(f, project))
+            continue
+        if qual.startswith("module:"):
+            parts[qual] = _module_digest(obj)
+            continue
+        if qual.startswith("stmt:"):
+            digest, follow = _statement_parts(*obj[:2], obj[2], project)
+            if digest is not None:
+                parts[qual] = digest
+            stack.extend(follow)
             continue
         digest, refs = _digest_and_refs(obj)
         parts[qual] = digest
         if not refs:
             continue
-        namespace = dict(getattr(inspect.getmodule(obj), "__dict__", {}))
-        if inspect.isfunction(obj) and obj.__closure__:
-            namespace.update(zip(obj.__code__.co_freevars, (c.cell_contents for c in obj.__closure__)))
+        namespace = _namespace(obj, refs, project)
+        home = getattr(inspect.getmodule(obj), "__name__", "?")
         for chain in refs:
-            for name, target in _resolve(chain, namespace, project):
-                if name.startswith("const:"):
-                    name = f"const:{getattr(inspect.getmodule(obj), '__name__', '?')}.{chain[0]}"
-                stack.append((name, target))
+            if chain[0] != "import":
+                stack.extend(_resolve(chain, namespace, home, project))
     total = hashlib.blake2b(repr(sorted(parts.items())).encode(), digest_size=16).hexdigest()
     return total, parts

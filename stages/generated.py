@@ -15,7 +15,7 @@ import os
 import shutil
 from typing import Any, Callable
 
-from . import registry
+from . import audit, registry
 from .config import GeneratedPath, GeneratedSpec, Pipeline
 from .fingerprint import code_fingerprint
 from .store import Store, check_folder, digest_json, seal_folder, warn_once
@@ -100,7 +100,11 @@ def write_generated(pipe: Pipeline, store: Store, names: list[str], log) -> None
             store.discard(gen.path)
         log(f"generating dataset '{name}' with {gen.generator} {gen.params} -> {gen.path}")
         tmp = store.tmp_dir()
-        registry.get(gen.generator).func(out_dir=tmp, **gen.params)
+        func = registry.get(gen.generator).func
+        if audit.enabled():
+            audit.audited(lambda: func(out_dir=tmp, **gen.params), f"generator {gen.generator}", func)
+        else:
+            func(out_dir=tmp, **gen.params)
         seal_folder(tmp, {"generator": gen.generator, "params": gen.params})
         os.makedirs(os.path.dirname(gen.path), exist_ok=True)
         try:

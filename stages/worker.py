@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from . import registry
+from . import audit, registry
 from .errors import CorruptEntry
 from .inputs import (DictInput, InputError, InputSpec, PairsInput, SparsePairsInput, StackInput, ValueInput,
                      partial_pairs, partial_tile)
@@ -180,7 +180,10 @@ def run_task(call: TaskCall, *upstream: TaskResult) -> TaskResult:
         kwargs["out_dir"] = out_dir
     t0 = time.perf_counter()
     try:
-        value = _call(fn, call, inputs, kwargs, failed)
+        if audit.enabled():  # tests and plugin checks: every project function that runs must be in the key
+            value = audit.audited(lambda: _call(fn, call, inputs, kwargs, failed), call.display, fn.func, fn.mirror)
+        else:
+            value = _call(fn, call, inputs, kwargs, failed)
     except Exception as exc:  # reported per item; the other tasks go on
         if out_dir:
             shutil.rmtree(out_dir, ignore_errors=True)

@@ -112,3 +112,180 @@ def test_a_dispatch_table_constant_is_hashed_by_names_and_follows_its_functions(
     assert first == again
     assert "fp_mod.step_a" in first[1] and "fp_mod.step_b" in first[1]
     assert digest(load(TABLE.replace("return x * 2", "return x * 3"))) != first[0]   # a held function's body
+
+
+# ---- everything a stage can run is in its key: the ways code is reached besides a module-level name ----
+
+PKG = "fp_pkg"
+
+
+@pytest.fixture
+def package(tmp_path, monkeypatch):
+    """``make(files, **edits)``: write ``files`` ({relative path: source, ``{pkg}`` standing for the package
+    name}) as package ``fp_pkg`` in a folder of its own (so that versions never share modules or bytecode),
+    after applying ``edits`` ({file stem: (old, new)}), and import its module ``main``."""
+    from stages import fingerprint
+
+    monkeypatch.setitem(fingerprint._DISK, "path", None)
+
+    def forget():
+        for mod in [m for m in sys.modules if m == PKG or m.startswith(PKG + ".")]:
+            sys.modules.pop(mod)
+
+    def make(files: dict[str, str], **edits: tuple[str, str]):
+        forget()
+        folder = tmp_path / uuid.uuid4().hex[:8]
+        for rel, src in {"__init__.py": "", **files}.items():
+            if rel[:-3] in edits:
+                old, new = edits[rel[:-3]]
+                assert old in src, (rel, old)
+                src = src.replace(old, new)
+            (folder / PKG / rel).parent.mkdir(parents=True, exist_ok=True)
+            (folder / PKG / rel).write_text(textwrap.dedent(src).replace("{pkg}", PKG))
+        sys.path.insert(0, str(folder))
+        try:
+            return importlib.import_module(f"{PKG}.main")
+        finally:
+            sys.path.remove(str(folder))
+
+    yield make
+    forget()
+
+
+def fp(main):
+    return code_fingerprint(main.stage, (PKG,))
+
+
+LOCAL_IMPORTS = {
+    "main.py": '''
+        def stage(x):
+            from .helpers import double          # relative, inside the body
+            import {pkg}.absolute as absolute    # absolute, aliased
+            from {pkg} import other              # a submodule by from-import
+            return double(x) + absolute.plus_one(x) + other.OFFSET
+        ''',
+    "helpers.py": "def double(x):\n    return 2 * x\n",
+    "absolute.py": "def plus_one(x):\n    return x + 1\n",
+    "other.py": "OFFSET = 3\n",
+}
+
+
+def test_imports_inside_a_function_body_are_followed(package):
+    base, parts = fp(package(LOCAL_IMPORTS))
+    assert f"{PKG}.helpers.double" in parts            # from .helpers import double
+    assert f"{PKG}.absolute.plus_one" in parts         # import pkg.absolute as absolute; absolute.plus_one
+    assert f"const:{PKG}.other.OFFSET" in parts        # from pkg import other; other.OFFSET
+    assert fp(package(LOCAL_IMPORTS))[0] == base       # the same code again: the same key
+    for stem, edit in (("helpers", ("2 * x", "3 * x")), ("absolute", ("x + 1", "x + 2")),
+                       ("other", ("OFFSET = 3", "OFFSET = 4"))):
+        assert fp(package(LOCAL_IMPORTS, **{stem: edit}))[0] != base, stem
+
+
+ATTRIBUTES = {
+    "main.py": '''
+        from . import settings
+        from .model import Model
+        import {pkg}.tables
+
+        def stage(x, scale=settings.default_scale):
+            m = Model(settings.FACTOR)
+            return m.apply(x) * scale + {pkg}.tables.WEIGHTS[0]
+        ''',
+    "settings.py": "FACTOR = 2.0\n\ndef unused():\n    return 1.0\n\ndefault_scale = 1.5\n",
+    "model.py": '''
+        from .ops import square
+
+        class Model:
+            def __init__(self, factor):
+                self.factor = factor
+
+            def apply(self, x):
+                return square(x) * self.factor
+        ''',
+    "ops.py": "def square(x):\n    return x * x\n",
+    "tables.py": "import numpy as np\n\nWEIGHTS = np.array([1.0, 2.0])\n",
+}
+
+
+def test_module_attributes_methods_and_defaults_are_followed(package):
+    base, parts = fp(package(ATTRIBUTES))
+    assert f"const:{PKG}.settings.FACTOR" in parts and f"const:{PKG}.settings.default_scale" in parts
+    assert f"{PKG}.model.Model" in parts and f"{PKG}.ops.square" in parts   # a method's helper
+    assert f"stmt:{PKG}.tables.WEIGHTS" in parts                               # a computed module value
+    for stem, edit in (("settings", ("FACTOR = 2.0", "FACTOR = 2.5")),
+                       ("settings", ("default_scale = 1.5", "default_scale = 1.0")),
+                       ("model", ("square(x) * self.factor", "square(x) + self.factor")),
+                       ("ops", ("x * x", "x ** 3")),
+                       ("tables", ("[1.0, 2.0]", "[1.5, 2.0]"))):
+        assert fp(package(ATTRIBUTES, **{stem: edit}))[0] != base, (stem, edit)
+    # a function of the module that nothing reaches still does not count
+    assert fp(package(ATTRIBUTES, settings=("return 1.0", "return 2.0")))[0] == base
+
+
+PARTIALS = {
+    "main.py": '''
+        import functools
+        from .steps import step_a, step_b
+
+        STEPS = {"a": functools.partial(step_a, k=2), "b": step_b}
+
+        def stage(x, name="a"):
+            return STEPS.get(name)(x)
+        ''',
+    "steps.py": "def step_a(x, k):\n    return x + k\n\ndef step_b(x):\n    return x * 2\n",
+}
+
+
+def test_functions_held_in_partials_of_a_dispatch_table_are_followed(package):
+    base, parts = fp(package(PARTIALS))
+    assert f"{PKG}.steps.step_a" in parts and f"{PKG}.steps.step_b" in parts
+    assert fp(package(PARTIALS))[0] == base
+    assert fp(package(PARTIALS, steps=("x + k", "x - k")))[0] != base
+    assert fp(package(PARTIALS, main=("k=2", "k=3")))[0] != base
+
+
+def test_a_project_module_used_as_a_value_counts_as_a_whole(package):
+    files = {"main.py": "from . import impl\n\ndef stage(x, how='twice'):\n    return getattr(impl, how)(x)\n",
+             "impl.py": "def twice(x):\n    return 2 * x\n"}
+    base, parts = fp(package(files))
+    assert f"module:{PKG}.impl" in parts
+    assert fp(package(files, impl=("2 * x", "3 * x")))[0] != base
+
+
+def test_the_audit_sees_a_function_the_fingerprint_cannot(package):
+    """By observation: a call the source does not show (through the module's globals) is reported."""
+    from stages import audit
+
+    files = {"main.py": '''
+        def hidden(x):
+            return x + 1
+
+        def stage(x):
+            return globals()["hid" + "den"](x)
+        '''}
+    main = package(files)
+    with audit.CallRecorder() as rec:
+        main.stage(1)
+    assert audit.uncovered(rec.executed(), fp(main)[1], frozenset({PKG})) == [f"{PKG}.main.hidden"]
+    # what the fingerprint follows is covered, methods and nested functions by their class or function
+    main = package(ATTRIBUTES)
+    with audit.CallRecorder() as rec:
+        main.stage(2.0)
+    assert {"Model.__init__", "Model.apply", "square"} <= {q for _, q in rec.executed()}
+    assert audit.uncovered(rec.executed(), fp(main)[1], frozenset({PKG})) == []
+
+
+def test_a_cached_helper_is_followed_through_its_decorator(package):
+    files = {"main.py": '''
+        import functools
+
+        @functools.lru_cache(maxsize=4)
+        def table(n):
+            return tuple(range(n))
+
+        def stage(x):
+            return x + sum(table(3))
+        '''}
+    base, parts = fp(package(files))
+    assert f"{PKG}.main.table" in parts
+    assert fp(package(files, main=("range(n)", "range(1, n)")))[0] != base
