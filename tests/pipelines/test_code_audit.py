@@ -46,7 +46,7 @@ def test_scape_pipeline_stages_run_only_fingerprinted_code(tmp_path):
         (data / sub).mkdir(parents=True)
     for kind in ("meshes", "flattened_meshes"):
         (data / kind / "template" / "mesh000.obj").symlink_to(src / kind / "template" / "mesh000.obj")
-        for name in ("mesh002", "mesh004"):
+        for name in ("mesh002",):
             (data / kind / "test" / f"{name}.obj").symlink_to(src / kind / "test" / f"{name}.obj")
     for name in ("landmark_vids.txt", "sparse_landmark_vids.txt", "uniform_sample_vids.txt"):
         (data / name).symlink_to(src / name)

@@ -10,7 +10,8 @@ Steps (each callable on its own; see the modules):
      anywhere on the target, so twisted or slid regions come back) then ``refine.refine_spectral``
      (full-resolution ZoomOut with local candidates) then ``deform.refine_deform`` (as-rigid-as-possible
      registration of the template onto the target, read back as nearest vertices) by default;
-     ``refine.refine_geodesic`` on request.
+     ``refine.refine_geodesic`` on request. The steps share ``nearest.nearest_compatible`` (the nearest target
+     vertex whose normal agrees) and are named in one table, ``refine.REFINE_STEPS``.
   4. ``transfer.transfer_landmarks``; ``measures`` evaluates maps where ground truth exists.
 ``dense_map`` runs them in order. Convention: template = source; a map is (n_template,) int target vertex ids.
 Ids: points given by the user are original vertex ids; maps between the steps are in the bases' local ids (the

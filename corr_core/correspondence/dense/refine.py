@@ -32,6 +32,10 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from corr_core.correspondence.dense.basis import MeshBasis
+from corr_core.correspondence.dense.deform import refine_deform
+from corr_core.correspondence.dense.fmaps import fmap_from_p2p
+from corr_core.correspondence.dense.nearest import nearest_compatible
+from corr_core.geometry.primitives import unique_edges, vertex_normals
 
 
 def _local_spectral_match(emb_s: np.ndarray, emb_t: np.ndarray, cands: np.ndarray) -> np.ndarray:
@@ -59,8 +63,6 @@ def refine_spectral(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, k: in
 
     Args: source, target: bases; p2p: (n_s,) int current map (local ids). Returns (n_s,) int.
     """
-    from corr_core.correspondence.dense.fmaps import fmap_from_p2p
-
     p2p = np.asarray(p2p, dtype=np.int64).copy()
     k = int(min(k or source.evecs.shape[1], source.evecs.shape[1], target.evecs.shape[1]))
     tree = cKDTree(target.V)
@@ -172,19 +174,6 @@ def _robust_kabsch_batch(X: np.ndarray, Y: np.ndarray, iterations: int = 4, cuto
     return R, t
 
 
-def _nearest_compatible(tree: cKDTree, normals_t: np.ndarray, P: np.ndarray, normals_p: np.ndarray,
-                        min_cos: float, k: int = 8) -> tuple[np.ndarray, np.ndarray]:
-    """Nearest target vertex to each point P (q,3) among its ``k`` nearest whose normal (n_t,3) makes a cosine
-    > ``min_cos`` with the point's normal (q,3): (ids (q,) int, distances (q,) float, inf when none qualifies).
-    The normal test rejects a touching body part (it faces the other way) and the inside of a thin part."""
-    d, c = tree.query(P, k=min(k, len(normals_t)))
-    d, c = d.reshape(len(P), -1), c.reshape(len(P), -1)
-    d = np.where(np.einsum("ij,ikj->ik", normals_p, normals_t[c]) > min_cos, d, np.inf)
-    best = np.argmin(d, axis=1)
-    rows = np.arange(len(P))
-    return c[rows, best], d[rows, best]
-
-
 def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, n_patches: int = 300,
                      patch_size: int = 64, icp_iterations: int = 6, rounds: int = 5, trim: float = 2.0,
                      n_candidates: int | None = None, normal_cos: float = -1.0) -> np.ndarray:
@@ -205,8 +194,6 @@ def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, n_pa
 
     Args: source, target: bases; p2p: (n_s,) int current map. Returns (n_s,) int refined map.
     """
-    from corr_core.geometry.primitives import vertex_normals
-
     p2p = np.asarray(p2p, dtype=np.int64).copy()
     n_patches = min(n_patches, len(source.samples))
     patch_size = min(patch_size, len(source.samples))
@@ -238,13 +225,13 @@ def _icp_pairs(tree: cKDTree, normals_t: np.ndarray, moved: np.ndarray, patch_no
                normal_cos: float) -> tuple[np.ndarray, np.ndarray]:
     """ICP partners of the moved patch points (b,p,3): target ids (b,p) int and distances (b,p) float (inf: no
     compatible partner). ``normal_cos`` <= -1: no normal test, the plain nearest vertex (one k-d tree query per
-    point instead of the ``_nearest_compatible`` search among 8)."""
+    point instead of the ``nearest.nearest_compatible`` search among 8)."""
     shape = moved.shape[:2]
     if normal_cos <= -1.0:
         d, j = tree.query(moved.reshape(-1, 3))
     else:
         normals = np.einsum("bij,bpj->bpi", R, patch_normals)
-        j, d = _nearest_compatible(tree, normals_t, moved.reshape(-1, 3), normals.reshape(-1, 3), normal_cos)
+        j, d = nearest_compatible(tree, normals_t, moved.reshape(-1, 3), normals.reshape(-1, 3), normal_cos)
     return j.reshape(shape), d.reshape(shape)
 
 
@@ -260,7 +247,7 @@ def _assign(tree: cKDTree, target: MeshBasis, p2p: np.ndarray, moved: np.ndarray
     """Target vertex of every moved template vertex (n_s,3): the nearest normal-compatible one (None), or the
     nearest among the ``n_candidates`` nearest to the current image; the current image where none qualifies."""
     if n_candidates is None:
-        new, d = _nearest_compatible(tree, normals_t, moved, moved_normals, 0.0)
+        new, d = nearest_compatible(tree, normals_t, moved, moved_normals, 0.0)
         return np.where(np.isfinite(d), new, p2p)
     _, cands = tree.query(target.V[p2p], k=min(n_candidates, target.n))
     cands = cands.reshape(len(p2p), -1)
@@ -268,7 +255,7 @@ def _assign(tree: cKDTree, target: MeshBasis, p2p: np.ndarray, moved: np.ndarray
     return cands[np.arange(len(p2p)), np.argmin(d, axis=1)]
 
 
-REFINE_STEPS = ("extrinsic", "spectral", "deform", "geodesic")   # refine_<step> (deform: the deform module)
+
 DEFAULT_REFINE = "extrinsic+spectral+deform"
 
 
@@ -286,13 +273,9 @@ def refine_map(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, refine: st
     if unknown or (refine is not None and not isinstance(refine, str)):
         raise ValueError(f"refine must be None, 'none' or steps of {list(REFINE_STEPS)} joined by '+' (e.g. "
                          f"{DEFAULT_REFINE!r}), got {refine!r}")
-    from corr_core.correspondence.dense.deform import refine_deform
-
-    steps = {"extrinsic": refine_extrinsic, "spectral": refine_spectral, "deform": refine_deform,
-             "geodesic": refine_geodesic}
     options = options or {}
     for name in names:
-        p2p = steps[name](source, target, p2p, **options.get(name, {}))
+        p2p = REFINE_STEPS[name](source, target, p2p, **options.get(name, {}))
     return p2p
 
 
@@ -303,8 +286,6 @@ def map_distortion(source: MeshBasis, target: MeshBasis, p2p: np.ndarray) -> flo
     A near-isometric map keeps edge lengths up to one scale; a map that twists a limb (the 180-degree turn of a
     body, forced to keep its feet pointing forward) shears it and scores higher. Args: p2p (n_s,) int local ids.
     """
-    from corr_core.geometry.primitives import unique_edges
-
     edges, _ = unique_edges(source.F)
     p2p = np.asarray(p2p, dtype=np.int64)
     length_s = np.linalg.norm(source.V[edges[:, 0]] - source.V[edges[:, 1]], axis=1)
@@ -330,3 +311,7 @@ def refine_best(source: MeshBasis, target: MeshBasis, maps: list, refine: str | 
     scores = [map_distortion(source, target, m) for m in refined]
     best = int(np.argmin(scores))
     return refined[best], best, scores
+
+
+REFINE_STEPS = {"extrinsic": refine_extrinsic, "spectral": refine_spectral, "deform": refine_deform,
+                "geodesic": refine_geodesic}   # the steps ``refine_map`` runs, by name

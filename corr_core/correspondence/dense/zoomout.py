@@ -57,19 +57,6 @@ def zoomout(source: MeshBasis, target: MeshBasis, C: np.ndarray, k_end: int = 10
     return C
 
 
-def zoomout_from_p2p(source: MeshBasis, target: MeshBasis, p2p_rows: np.ndarray, k_start: int = 20,
-                     k_end: int = 100, step: int = 5, n_source: int | None = None,
-                     n_target: int | None = None) -> np.ndarray:
-    """ZoomOut started from a point map given at the source samples.
-
-    Args: p2p_rows: (len(source.samples[:n_source]),) target vertex of each template sample.
-    Returns: C: (k_end, k_end).
-    """
-    rows = source.samples[:n_source]
-    C = fmap_from_p2p(np.asarray(p2p_rows), source.evecs[rows, :k_start], target.evecs[:, :k_start])
-    return zoomout(source, target, C, k_end=k_end, step=step, n_source=n_source, n_target=n_target)
-
-
 def p2p_full(source: MeshBasis, target: MeshBasis, C: np.ndarray, adjoint: bool = True) -> np.ndarray:
     """Every template vertex's nearest target vertex in the spectral embedding of C: (n_s,) int."""
     ks, kt = C.shape

@@ -166,3 +166,19 @@ def test_load_repaired_mesh_reads_and_repairs(tmp_path):
     assert len(V2) == len(V)
     np.testing.assert_array_equal(F2, F)
     assert records[0]["kind"] == "duplicate_faces" and str(tmp_path / "m.obj") in records[0]["message"]
+
+
+def test_vertex_ids_survive_junk_vertices_before_and_among_the_real_ones():
+    """Unused vertices placed first and in the middle (as exporters that keep deleted vertices do): the repaired
+    faces still index the file's vertices, so a step that compacts or renumbers vertices fails here (the other
+    tests append junk after the real vertices, where a compaction changes no id)."""
+    V, F = sphere(300)
+    order = np.concatenate([[len(V)], np.arange(150), [len(V) + 1], np.arange(150, len(V)), [len(V) + 2]])
+    V_junk = np.vstack([V, [[50.0, 0, 0], [0, 60.0, 0], [1e30, 0, 0]]])[order]       # junk at 0, 151 and last
+    new_id = np.empty(len(order), dtype=np.int64)
+    new_id[order] = np.arange(len(order))
+    F_file = np.vstack([new_id[F], new_id[F[3]]])                                    # + one duplicated face
+    repaired, records = repair_mesh(V_junk, F_file, "junk.obj", keep_largest_component=True)
+    np.testing.assert_array_equal(repaired, new_id[F])
+    np.testing.assert_array_equal(V_junk[repaired], V[F])                             # same positions per corner
+    assert _kinds(records)["unreferenced_vertices"]["count"] == 3

@@ -6,7 +6,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from corr_core.correspondence.dense import measures, mesh_basis, refine_extrinsic
-from corr_core.correspondence.dense.refine import _nearest_compatible
+from corr_core.correspondence.dense.nearest import nearest_compatible
 
 FAST = {"n_patches": 120, "rounds": 5}
 
@@ -53,9 +53,9 @@ def test_nearest_compatible_skips_a_part_facing_the_other_way():
     V = np.vstack([lower, upper])
     N = np.vstack([np.tile([0.0, 0.0, 1.0], (len(g), 1)), np.tile([0.0, 0.0, -1.0], (len(g), 1))])
     P, NP = np.array([[0.5, 0.5, 0.08]]), np.array([[0.0, 0.0, 1.0]])
-    ids, d = _nearest_compatible(cKDTree(V), N, P, NP, min_cos=0.5)
+    ids, d = nearest_compatible(cKDTree(V), N, P, NP, min_cos=0.5)
     assert ids[0] < len(g) and np.isclose(d[0], 0.08)
-    ids, d = _nearest_compatible(cKDTree(V), N, P, -NP, min_cos=0.5, k=4)
+    ids, d = nearest_compatible(cKDTree(V), N, P, -NP, min_cos=0.5, k=4)
     assert ids[0] >= len(g)
 
 
@@ -100,3 +100,41 @@ def test_refine_best_keeps_the_less_distorted_hypothesis_whatever_its_rank(pair)
         assert scores == [map_distortion(S, T, m) for m in maps]
     with pytest.raises(ValueError, match="no hypothesis"):
         refine_best(S, T, [])
+
+
+def _thin_plate(n: int = 17, thickness: float = 0.02):
+    """A closed plate 1 x 1 x ``thickness`` (top and bottom grids of n x n vertices, joined at the rim), faces
+    oriented outward: (V (2 n^2, 3), F, top (n^2,) bool mask)."""
+    g = np.linspace(0.0, 1.0, n)
+    x, y = np.meshgrid(g, g, indexing="ij")
+    grid = np.column_stack([x.ravel(), y.ravel()])
+    V = np.vstack([np.column_stack([grid, np.full(n * n, thickness)]), np.column_stack([grid, np.zeros(n * n)])])
+    idx = np.arange(n * n).reshape(n, n)
+    quads = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
+    top = np.vstack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    bottom = top[:, ::-1] + n * n
+    rim = np.concatenate([idx[:, 0], idx[-1, 1:], idx[::-1, -1][1:], idx[0, ::-1][1:-1]])   # boundary loop
+    a, b = rim, np.roll(rim, -1)
+    sides = np.vstack([np.column_stack([a, a + n * n, b]), np.column_stack([b, a + n * n, b + n * n])])
+    F = np.vstack([top, bottom, sides])
+    return V, F, np.arange(len(V)) < n * n
+
+
+def test_refine_extrinsic_keeps_each_side_of_a_thin_part():
+    """The normal test, through the whole refinement: a thin plate (0.02 thick, edges 0.0625) whose top is
+    re-sampled on the target (each inner top vertex moved up to 0.45 edge along the plate, at random, so no rigid
+    patch motion undoes it). For many top vertices the nearest target vertex is then on the bottom, right below;
+    only the normal test (the bottom faces the other way) keeps the map on the top. Accepting any normal in the
+    final assignment sends a large part of the top to the bottom."""
+    V, F, top = _thin_plate()
+    # keep the orientation test honest: the top faces up, the bottom down
+    n_top = np.cross(V[F[0, 1]] - V[F[0, 0]], V[F[0, 2]] - V[F[0, 0]])
+    assert n_top[2] > 0
+    V_t = V.copy()
+    inner = top & (V[:, 0] > 0) & (V[:, 0] < 1) & (V[:, 1] > 0) & (V[:, 1] < 1)
+    jitter = np.random.default_rng(0).uniform(-0.45, 0.45, (int(inner.sum()), 2)) / 16
+    V_t[inner, :2] += jitter
+    S, T = mesh_basis(V, F, k=10, n_samples=300), mesh_basis(V_t, F, k=10, n_samples=300)
+    out = refine_extrinsic(S, T, np.arange(S.n), n_patches=40, patch_size=32, rounds=3)
+    on_top = top[out[top]]
+    assert on_top.mean() > 0.95, on_top.mean()
