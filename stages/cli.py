@@ -13,6 +13,8 @@ MAX_WORKERS = 4 * (os.cpu_count() or 1)
 EPILOG = """examples (each is run by tests/stages/test_help_examples.py):
   python -m stages run pipeline.yaml
   python -m stages run pipeline.yaml --set mrf.sigma=0.5 --dry-run     # what would rerun, and why
+  python -m stages run pipeline.yaml mrf                               # only mrf and what it needs
+  python -m stages run pipeline.yaml --force dense_sparse              # recompute it and its downstream stages
   python -m stages sweep pipeline.yaml --grid align.sigma_scale=0.5,1,2
   python -m stages results pipeline.yaml --json
 """
@@ -41,6 +43,17 @@ def _output_file(example: str):
     return check
 
 
+def _selection(p: argparse.ArgumentParser, what: str = "run") -> None:
+    """Target stages (after the pipeline, or ``--until``) and ``--force``: the same in ``run`` and ``sweep``."""
+    p.add_argument("targets", nargs="*", metavar="STAGE",
+                   help=f"{what} only these stages and the stages they need (default: every stage)")
+    p.add_argument("--until", action="append", default=[], metavar="STAGE",
+                   help="the same as naming STAGE after the pipeline: STAGE and what it needs, nothing downstream")
+    p.add_argument("--force", action="append", default=[], metavar="STAGE",
+                   help="recompute STAGE and its downstream stages even when cached (e.g. after a library "
+                        "upgrade); the stored results are replaced")
+
+
 def _common(p: argparse.ArgumentParser, sets: bool = True) -> None:
     p.add_argument("pipeline", help="the pipeline YAML file")
     if sets:
@@ -52,14 +65,19 @@ def _common(p: argparse.ArgumentParser, sets: bool = True) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from . import __version__
+
     parser = argparse.ArgumentParser(prog="python -m stages", description=(
         "Declarative, cached, parallel pipelines for shape alignment and correspondence."),
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"stages {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("run", help="run a pipeline (only what changed is recomputed)",
-                       description="Run a pipeline: compute the cache misses under dask, publish outputs.")
+                       description="Run a pipeline: compute the cache misses under dask, publish outputs. Before "
+                                   "executing, one line per stage says how many tasks run and why.")
     _common(p)
+    _selection(p)
     p.add_argument("--dry-run", action="store_true", help="list what would execute and why; run nothing")
     p.add_argument("--workers", type=_workers, default=2,
                    help=f"local worker processes, 0..{MAX_WORKERS} (default 2); 0 runs in this process without dask")
@@ -68,7 +86,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: the pipeline's 'output:')")
     p.add_argument("--summary-json", default=None, metavar="PATH", type=_output_file("summary.json"),
                    help="write per-stage tasks executed / cached / seconds as JSON")
-    p.add_argument("--quiet", action="store_true", help="no progress output (failures are still printed)")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress output and no reasons (failures are still printed)")
 
     p = sub.add_parser("status", help="per stage: tasks cached and to run, with reasons",
                        description="Show what is cached and what a run would execute, and why.")
@@ -78,6 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("sweep", help="run a parameter grid and tabulate the final metrics",
                        description="Run every point of a parameter grid (resumable) and print a table of metrics.")
     _common(p)
+    _selection(p, "run every grid point of")
     p.add_argument("--grid", action="append", required=True, metavar="KEY=V1,V2,...",
                    help="a grid axis; repeat for a product of axes")
     p.add_argument("--workers", type=_workers, default=2, help=f"local worker processes, 0..{MAX_WORKERS}")
@@ -120,8 +140,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def parse(argv=None) -> argparse.Namespace:
+    """The command line as parsed; target stages may also follow options (``run p.yaml --set a=1 STAGE``)."""
+    parser = build_parser()
+    args, extra = parser.parse_known_args(argv)
+    if extra and (not hasattr(args, "targets") or any(a.startswith("-") for a in extra)):
+        parser.error(f"unrecognized arguments: {' '.join(extra)}")
+    if hasattr(args, "targets"):
+        args.targets = list(dict.fromkeys(args.targets + extra + args.until))
+    return args
+
+
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+    """The ``stages`` console script and ``python -m stages``: returns the exit code."""
+    args = parse(argv)
     try:
         return _dispatch(args)
     except PipelineError as exc:
@@ -153,7 +185,7 @@ def _dispatch(args) -> int:
         try:
             summary = api.run(args.pipeline, args.sets, workers=args.workers, scheduler=args.scheduler,
                                  dry=args.dry_run, cache_dir=args.cache, output_dir=args.out, quiet=args.quiet,
-                                 summary_json=args.summary_json)
+                                 summary_json=args.summary_json, targets=args.targets, force=args.force)
         except api.RunFailed as exc:
             if not args.quiet:
                 _print_summary(exc.summary)
@@ -177,7 +209,8 @@ def _dispatch(args) -> int:
         return 0
     if args.command == "sweep":
         result = api.sweep(args.pipeline, args.grid, args.sets, workers=args.workers, scheduler=args.scheduler,
-                           cache_dir=args.cache, quiet=args.quiet, dry=args.dry_run,
+                           cache_dir=args.cache, quiet=args.quiet, dry=args.dry_run, targets=args.targets,
+                           force=args.force,
                            metric_keys=[m.strip() for m in args.metrics.split(",") if m.strip()] if args.metrics else None)
         if args.dry_run:
             for row in result["dry_run"]:
