@@ -67,7 +67,8 @@ def _common(p: argparse.ArgumentParser, sets: bool = True) -> None:
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
 
-    parser = argparse.ArgumentParser(prog="python -m stages", description=(
+    prog = "stages" if os.path.basename(sys.argv[0] or "") == "stages" else "python -m stages"  # console script
+    parser = argparse.ArgumentParser(prog=prog, description=(
         "Declarative, cached, parallel pipelines for shape alignment and correspondence."),
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"stages {__version__}")
@@ -117,12 +118,17 @@ def build_parser() -> argparse.ArgumentParser:
     _common(p)
     p.add_argument("--json", action="store_true", help="print JSON")
 
-    p = sub.add_parser("gc", help="remove cache entries no given pipeline reaches",
+    p = sub.add_parser("gc", help="remove cache entries of these pipelines that they no longer reach",
                        description="Delete cache entries that none of the given pipelines (and their recorded "
-                                   "sweeps) reaches.")
+                                   "sweeps) reaches. By default only entries that belong to them (that their "
+                                   "recorded runs used) are removed: other pipelines sharing the cache keep theirs.")
     p.add_argument("pipelines", nargs="+", help="pipelines whose results to keep")
     p.add_argument("--cache", default=None, metavar="DIR|URL", help="the cache folder or s3:// URL of the pipelines")
-    p.add_argument("--dry-run", action="store_true", help="only report what would be removed")
+    p.add_argument("--dry-run", action="store_true",
+                   help="only report what would be removed, and which pipeline it belongs to")
+    p.add_argument("--all", dest="everything", action="store_true",
+                   help="also remove entries of other pipelines and entries no recorded run used (everything "
+                        "the given pipelines do not reach)")
     p.add_argument("--no-keep-sweeps", action="store_true", help="also remove results of recorded sweeps")
 
     p = sub.add_parser("report", help="write a self-contained HTML report of a pipeline's results",
@@ -247,11 +253,16 @@ def _dispatch(args) -> int:
                 print(f"{k:<40} {v:.4g}" if isinstance(v, float) else f"{k:<40} {v}")
         return 0 if "_not_computed" not in m else 3
     if args.command == "gc":
-        res = api.gc(args.pipelines, args.cache, dry=args.dry_run, keep_sweeps=not args.no_keep_sweeps)
+        res = api.gc(args.pipelines, args.cache, dry=args.dry_run, keep_sweeps=not args.no_keep_sweeps,
+                     everything=args.everything)
         verb = "would remove" if res["dry_run"] else "removed"
+        if res["dry_run"]:
+            for line in _gc_groups(res):
+                print(line)
         print(f"{verb} {res['removed']} entr{'y' if res['removed'] == 1 else 'ies'} and "
               f"{res['generated_removed']} generated dataset(s), {res['bytes_freed'] / 2**20:.1f} MiB; "
-              f"kept {res['kept']}")
+              f"kept {res['kept']}" + (f" ({res['others_kept']} of other pipelines or of none recorded: --all "
+                                       "removes them)" if res["others_kept"] else ""))
         return 0
     if args.command == "report":
         from .report import write_report
@@ -278,6 +289,17 @@ def _dispatch(args) -> int:
                     print(f"    {r['doc']}")
         return 0
     return 2
+
+
+def _gc_groups(res: dict) -> list[str]:
+    """The entries a gc dry run would remove, one line per pipeline and stage: how many, MiB, whose."""
+    groups: dict[tuple[str, str], list[int]] = {}
+    for e in res["entries"]:
+        groups.setdefault((", ".join(e["pipelines"]), e["stage"]), []).append(e["bytes"])
+    lines = [f"  {len(b):>5} entr{'y' if len(b) == 1 else 'ies'} of stage {stage:<20} {sum(b) / 2**20:8.1f} MiB  "
+             f"pipeline {who}" for (who, stage), b in sorted(groups.items())]
+    lines += [f"  generated dataset {g['name']}  pipeline {', '.join(g['pipelines'])}" for g in res["generated"]]
+    return lines
 
 
 def _print_summary(summary: dict) -> None:

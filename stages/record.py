@@ -51,6 +51,61 @@ def load_record(plan: Plan) -> dict | None:
     return None
 
 
+LEDGER_SUFFIX = ".keys.json"
+
+
+def ledger_path(plan: Plan) -> str:
+    """``cache/runs/<pipeline-id>.keys.json``: every entry and generated dataset the runs and sweeps of this
+    pipeline planned (what ``gc`` may remove on its behalf, and never on another pipeline's)."""
+    return os.path.join(plan.store.root, "runs", pipeline_id(plan) + LEDGER_SUFFIX)
+
+
+def note_keys(plan: Plan, keys, generated=()) -> None:
+    """Add ``keys`` (cache entries) and ``generated`` (folder names under ``cache/generated``) to the pipeline's
+    ledger (:func:`ledger_path`); written only when something is new. Two runs of one pipeline at once may drop
+    each other's additions: those entries then belong to no pipeline, which ``gc`` removes only with ``--all``."""
+    path = ledger_path(plan)
+    old = read_checked_json(path, "it is written again") or {}
+    known, known_gen = set(old.get("keys", [])), set(old.get("generated", []))
+    if set(keys) <= known and set(generated) <= known_gen and old.get("name") == plan.pipeline.name:
+        return
+    write_checked_json(path, {"pipeline": plan.pipeline.file, "name": plan.pipeline.name,
+                              "keys": sorted(known | set(keys)), "generated": sorted(known_gen | set(generated))})
+
+
+@dataclass
+class Owner:
+    """A pipeline as a cache knows it from its records: ``label`` (``name (file)``), the entries and generated
+    datasets its recorded runs reference."""
+    label: str
+    keys: set
+    generated: set
+
+
+def owners(store_root: str) -> dict[str, Owner]:
+    """{pipeline id: Owner} from every ledger and run record under ``cache/runs`` (a record alone, as written
+    before ledgers existed, references the keys of that pipeline's last run)."""
+    folder = os.path.join(store_root, "runs")
+    out: dict[str, Owner] = {}
+    for fn in sorted(os.listdir(folder)) if os.path.isdir(folder) else []:
+        if not fn.endswith(".json"):
+            continue
+        ledger = fn.endswith(LEDGER_SUFFIX)
+        pid = fn[:-len(LEDGER_SUFFIX)] if ledger else fn[:-5]
+        doc = read_checked_json(os.path.join(folder, fn), "gc treats its entries as belonging to no pipeline")
+        if not doc:
+            continue
+        label = f"{doc.get('name', pid)} ({os.path.basename(str(doc.get('pipeline', '?')))})"
+        owner = out.setdefault(pid, Owner(label, set(), set()))
+        if ledger:
+            owner.keys |= set(doc.get("keys", []))
+            owner.generated |= set(doc.get("generated", []))
+        else:
+            owner.keys |= {t.get("key") for st in doc.get("stages", {}).values() if isinstance(st, dict)
+                           for t in st.get("tasks", {}).values() if isinstance(t, dict)}
+    return out
+
+
 def sweep_record_files(plan: Plan) -> list[str]:
     """The files under ``cache/sweeps/`` that record sweeps of this pipeline (see stages.sweep.sweep_path)."""
     folder = os.path.join(plan.store.root, "sweeps")

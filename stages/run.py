@@ -18,7 +18,7 @@ from .execute import clean_tmp, execute_rounds
 from .generated import write_generated
 from .plan import Plan, plan_pipeline
 from .publish import publish, verify_published
-from .record import build_record, load_record, save_record
+from .record import build_record, load_record, note_keys, save_record
 from .results import metrics
 from .session import client_session, given_client, stderr_log
 from .status import dry_run, format_dry_run
@@ -71,6 +71,11 @@ def prepare(plan: Plan, log) -> Plan:
         plan = plan.again()
     plan.save_caches()
     return plan
+
+
+def generated_names(plan: Plan) -> list[str]:
+    """The folder names under ``cache/generated`` of the generated datasets ``plan`` uses."""
+    return [os.path.basename(g.path) for g in plan.pipeline.generated.values() if g.path]
 
 
 def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None, dry: bool = False,
@@ -133,6 +138,7 @@ def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None,
     if record_before and not any(s["executed"] for s in summary["stages"].values()):
         record["summary"] = record_before.get("summary", summary) | {"last_noop": summary["wall_seconds"]}
     save_record(plan, record)
+    note_keys(plan, [t.key for t in plan.tasks()], generated_names(plan))
     m = metrics(plan)  # also when items failed: the metrics then list the items they left out (_left_out)
     if m and not plan.untargeted:  # a run of some targets does not replace the whole pipeline's metrics
         try:

@@ -9,9 +9,9 @@ import time
 from .errors import PipelineError
 from .execute import execute_rounds
 from .plan import plan_pipeline
-from .record import pipeline_id
+from .record import note_keys, pipeline_id
 from .results import metrics, scalar_metrics
-from .run import prepare
+from .run import generated_names, prepare
 from .session import client_session, stderr_log
 from .status import dry_run, format_dry_run
 from .store import digest_json, write_checked_json
@@ -71,6 +71,7 @@ def sweep(path: str, grids: list[str], overrides=(), workers: int = 2, scheduler
         with client_session(workers, scheduler, store.root, log) as get_client:
             plans, outcome, _ = execute_rounds(plans, get_client, quiet=quiet, log=log)
         failures = [{"stage": r.stage, "item": r.label, "error": r.error} for r in outcome.failed()]
+    note_keys(plans[0], [t.key for pl in plans for t in pl.tasks()], [g for pl in plans for g in generated_names(pl)])
     rows = [{"point": dict(x.split("=", 1) for x in p), "metrics": metrics(pl)} for p, pl in zip(points, plans)]
     result = {"pipeline": os.path.abspath(path), "grid": grids, "overrides": list(overrides), "rows": rows,
               "failures": failures, "time": time.time(), "headline": headline_columns(plans[0], rows, metric_keys)}
