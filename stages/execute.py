@@ -216,7 +216,8 @@ def execute_rounds(plans: list[Plan], get_client, quiet: bool = False, key_suffi
     for a stored result. A candidates result found damaged while planning is invalidated (with a warning) and
     recomputed. Tasks of forced stages (``Plan.forced``) run once per run even when cached. ``get_client()`` is
     called only when something must run; ``log`` (print-like) gets, per round, one line per stage with tasks to
-    run and the first reason why (:func:`stages.status.run_lines`). Returns the final plans, the outcome of every task run, and the keys that were missing."""
+    run and the first reason why (:func:`stages.status.run_lines`). Returns the final plans, the outcome of every
+    task run, and the keys that were missing."""
     outcome, missing_all = Outcome(), set()
     for round_no in range(sum(len(pl.stages) for pl in plans) + 2):  # each round plans at least one more stage
         plans = [_without_damaged(pl, log) for pl in plans]
