@@ -13,6 +13,8 @@ MAX_WORKERS = 4 * (os.cpu_count() or 1)
 EPILOG = """examples (each is run by tests/stages/test_help_examples.py):
   python -m stages run pipeline.yaml
   python -m stages run pipeline.yaml --set mrf.sigma=0.5 --dry-run     # what would rerun, and why
+  python -m stages run pipeline.yaml mrf                               # only mrf and what it needs
+  python -m stages run pipeline.yaml --force dense_sparse              # recompute it and its downstream stages
   python -m stages sweep pipeline.yaml --grid align.sigma_scale=0.5,1,2
   python -m stages results pipeline.yaml --json
 """
@@ -41,6 +43,17 @@ def _output_file(example: str):
     return check
 
 
+def _selection(p: argparse.ArgumentParser, what: str = "run") -> None:
+    """Target stages (after the pipeline, or ``--until``) and ``--force``: the same in ``run`` and ``sweep``."""
+    p.add_argument("targets", nargs="*", metavar="STAGE",
+                   help=f"{what} only these stages and the stages they need (default: every stage)")
+    p.add_argument("--until", action="append", default=[], metavar="STAGE",
+                   help="the same as naming STAGE after the pipeline: STAGE and what it needs, nothing downstream")
+    p.add_argument("--force", action="append", default=[], metavar="STAGE",
+                   help="recompute STAGE and its downstream stages even when cached (e.g. after a library "
+                        "upgrade); the stored results are replaced")
+
+
 def _common(p: argparse.ArgumentParser, sets: bool = True) -> None:
     p.add_argument("pipeline", help="the pipeline YAML file")
     if sets:
@@ -52,14 +65,20 @@ def _common(p: argparse.ArgumentParser, sets: bool = True) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m stages", description=(
+    from . import __version__
+
+    prog = "stages" if os.path.basename(sys.argv[0] or "") == "stages" else "python -m stages"  # console script
+    parser = argparse.ArgumentParser(prog=prog, description=(
         "Declarative, cached, parallel pipelines for shape alignment and correspondence."),
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"stages {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("run", help="run a pipeline (only what changed is recomputed)",
-                       description="Run a pipeline: compute the cache misses under dask, publish outputs.")
+                       description="Run a pipeline: compute the cache misses under dask, publish outputs. Before "
+                                   "executing, one line per stage says how many tasks run and why.")
     _common(p)
+    _selection(p)
     p.add_argument("--dry-run", action="store_true", help="list what would execute and why; run nothing")
     p.add_argument("--workers", type=_workers, default=2,
                    help=f"local worker processes, 0..{MAX_WORKERS} (default 2); 0 runs in this process without dask")
@@ -68,7 +87,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: the pipeline's 'output:')")
     p.add_argument("--summary-json", default=None, metavar="PATH", type=_output_file("summary.json"),
                    help="write per-stage tasks executed / cached / seconds as JSON")
-    p.add_argument("--quiet", action="store_true", help="no progress output (failures are still printed)")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress output and no reasons (failures are still printed)")
 
     p = sub.add_parser("status", help="per stage: tasks cached and to run, with reasons",
                        description="Show what is cached and what a run would execute, and why.")
@@ -78,6 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("sweep", help="run a parameter grid and tabulate the final metrics",
                        description="Run every point of a parameter grid (resumable) and print a table of metrics.")
     _common(p)
+    _selection(p, "run every grid point of")
     p.add_argument("--grid", action="append", required=True, metavar="KEY=V1,V2,...",
                    help="a grid axis; repeat for a product of axes")
     p.add_argument("--workers", type=_workers, default=2, help=f"local worker processes, 0..{MAX_WORKERS}")
@@ -97,12 +118,17 @@ def build_parser() -> argparse.ArgumentParser:
     _common(p)
     p.add_argument("--json", action="store_true", help="print JSON")
 
-    p = sub.add_parser("gc", help="remove cache entries no given pipeline reaches",
+    p = sub.add_parser("gc", help="remove cache entries of these pipelines that they no longer reach",
                        description="Delete cache entries that none of the given pipelines (and their recorded "
-                                   "sweeps) reaches.")
+                                   "sweeps) reaches. By default only entries that belong to them (that their "
+                                   "recorded runs used) are removed: other pipelines sharing the cache keep theirs.")
     p.add_argument("pipelines", nargs="+", help="pipelines whose results to keep")
     p.add_argument("--cache", default=None, metavar="DIR|URL", help="the cache folder or s3:// URL of the pipelines")
-    p.add_argument("--dry-run", action="store_true", help="only report what would be removed")
+    p.add_argument("--dry-run", action="store_true",
+                   help="only report what would be removed, and which pipeline it belongs to")
+    p.add_argument("--all", dest="everything", action="store_true",
+                   help="also remove entries of other pipelines and entries no recorded run used (everything "
+                        "the given pipelines do not reach)")
     p.add_argument("--no-keep-sweeps", action="store_true", help="also remove results of recorded sweeps")
 
     p = sub.add_parser("report", help="write a self-contained HTML report of a pipeline's results",
@@ -120,8 +146,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def parse(argv=None) -> argparse.Namespace:
+    """The command line as parsed; target stages may also follow options (``run p.yaml --set a=1 STAGE``)."""
+    parser = build_parser()
+    args, extra = parser.parse_known_args(argv)
+    if extra and (not hasattr(args, "targets") or any(a.startswith("-") for a in extra)):
+        parser.error(f"unrecognized arguments: {' '.join(extra)}")
+    if hasattr(args, "targets"):
+        args.targets = list(dict.fromkeys(args.targets + extra + args.until))
+    return args
+
+
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+    """The ``stages`` console script and ``python -m stages``: returns the exit code."""
+    args = parse(argv)
     try:
         return _dispatch(args)
     except PipelineError as exc:
@@ -153,7 +191,7 @@ def _dispatch(args) -> int:
         try:
             summary = api.run(args.pipeline, args.sets, workers=args.workers, scheduler=args.scheduler,
                                  dry=args.dry_run, cache_dir=args.cache, output_dir=args.out, quiet=args.quiet,
-                                 summary_json=args.summary_json)
+                                 summary_json=args.summary_json, targets=args.targets, force=args.force)
         except api.RunFailed as exc:
             if not args.quiet:
                 _print_summary(exc.summary)
@@ -177,7 +215,8 @@ def _dispatch(args) -> int:
         return 0
     if args.command == "sweep":
         result = api.sweep(args.pipeline, args.grid, args.sets, workers=args.workers, scheduler=args.scheduler,
-                           cache_dir=args.cache, quiet=args.quiet, dry=args.dry_run,
+                           cache_dir=args.cache, quiet=args.quiet, dry=args.dry_run, targets=args.targets,
+                           force=args.force,
                            metric_keys=[m.strip() for m in args.metrics.split(",") if m.strip()] if args.metrics else None)
         if args.dry_run:
             for row in result["dry_run"]:
@@ -214,11 +253,16 @@ def _dispatch(args) -> int:
                 print(f"{k:<40} {v:.4g}" if isinstance(v, float) else f"{k:<40} {v}")
         return 0 if "_not_computed" not in m else 3
     if args.command == "gc":
-        res = api.gc(args.pipelines, args.cache, dry=args.dry_run, keep_sweeps=not args.no_keep_sweeps)
+        res = api.gc(args.pipelines, args.cache, dry=args.dry_run, keep_sweeps=not args.no_keep_sweeps,
+                     everything=args.everything)
         verb = "would remove" if res["dry_run"] else "removed"
+        if res["dry_run"]:
+            for line in _gc_groups(res):
+                print(line)
         print(f"{verb} {res['removed']} entr{'y' if res['removed'] == 1 else 'ies'} and "
               f"{res['generated_removed']} generated dataset(s), {res['bytes_freed'] / 2**20:.1f} MiB; "
-              f"kept {res['kept']}")
+              f"kept {res['kept']}" + (f" ({res['others_kept']} of other pipelines or of none recorded: --all "
+                                       "removes them)" if res["others_kept"] else ""))
         return 0
     if args.command == "report":
         from .report import write_report
@@ -245,6 +289,17 @@ def _dispatch(args) -> int:
                     print(f"    {r['doc']}")
         return 0
     return 2
+
+
+def _gc_groups(res: dict) -> list[str]:
+    """The entries a gc dry run would remove, one line per pipeline and stage: how many, MiB, whose."""
+    groups: dict[tuple[str, str], list[int]] = {}
+    for e in res["entries"]:
+        groups.setdefault((", ".join(e["pipelines"]), e["stage"]), []).append(e["bytes"])
+    lines = [f"  {len(b):>5} entr{'y' if len(b) == 1 else 'ies'} of stage {stage:<20} {sum(b) / 2**20:8.1f} MiB  "
+             f"pipeline {who}" for (who, stage), b in sorted(groups.items())]
+    lines += [f"  generated dataset {g['name']}  pipeline {', '.join(g['pipelines'])}" for g in res["generated"]]
+    return lines
 
 
 def _print_summary(summary: dict) -> None:

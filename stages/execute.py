@@ -20,7 +20,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 from .errors import UserError
-from .plan import Plan, Task, build_plan
+from .plan import Plan, Task
+from .status import run_lines
 from .store import Store
 from .worker import TaskCall, TaskResult, TaskStatus, run_task
 
@@ -41,10 +42,10 @@ class Outcome:
         return self.with_status(TaskStatus.CORRUPT)
 
 
-def task_call(task: Task, store: Store) -> TaskCall:
-    """What a worker needs to run ``task`` against ``store``."""
+def task_call(task: Task, store: Store, force: bool = False) -> TaskCall:
+    """What a worker needs to run ``task`` against ``store`` (``force``: replace the stored result, if any)."""
     return TaskCall(task.key, task.stage, task.label, task.function, task.params, task.inputs, task.item_name,
-                    store.location, task.display)
+                    store.location, task.display, force)
 
 
 class Progress:
@@ -155,13 +156,15 @@ def _ctrl_c_ignored_by_children():
 
 
 def execute(tasks: list[Task], store: Store, client=None, quiet: bool = False, stream=None,
-            key_suffix: str = "", prior: dict[str, TaskResult] | None = None) -> Outcome:
+            key_suffix: str = "", prior: dict[str, TaskResult] | None = None,
+            forced: set[str] | frozenset[str] = frozenset()) -> Outcome:
     """Run ``tasks`` (cache misses, in dependency order); ``client=None`` runs them in this process.
 
     key_suffix: appended to the dask keys. A repair pass after a corrupt input must not reuse the first pass's
     keys, or the scheduler may hand back the first pass's (corrupt) results instead of running the tasks again.
     prior: results of upstream tasks run earlier in this run (an earlier round): passed to the tasks that depend
     on them, so items that failed there are left out here too.
+    forced: keys of tasks that compute and replace their stored result even when it is there (``--force``).
     """
     prior = prior or {}
     outcome = Outcome()
@@ -177,7 +180,7 @@ def execute(tasks: list[Task], store: Store, client=None, quiet: bool = False, s
         for t in unique.values():
             ups = [outcome.results[k] if k in outcome.results else prior[k] for k in t.deps
                    if k in outcome.results or k in prior]
-            res = run_task(task_call(t, store), *ups)
+            res = run_task(task_call(t, store, t.key in forced), *ups)
             outcome.results[t.key] = res
             progress.update(t.stage, res.status.succeeded)
     else:
@@ -187,7 +190,8 @@ def execute(tasks: list[Task], store: Store, client=None, quiet: bool = False, s
         for t in unique.values():
             ups = [futures[k] if k in futures else prior[k] for k in t.deps if k in futures or k in prior]
             dask_key = f"{t.stage}-{t.label or 'once'}-{t.key[:16]}{key_suffix}".replace(" ", "_")
-            futures[t.key] = client.submit(run_task, task_call(t, store), *ups, key=dask_key, retries=0)
+            futures[t.key] = client.submit(run_task, task_call(t, store, t.key in forced), *ups, key=dask_key,
+                                          retries=0)
         by_future = {f.key: k for k, f in futures.items()}
         for fut in as_completed(list(futures.values())):
             key = by_future[fut.key]
@@ -210,30 +214,40 @@ def execute_rounds(plans: list[Plan], get_client, quiet: bool = False, key_suffi
     """Run the misses of ``plans`` (sharing one store), in rounds: after a round, a plan with a stage waiting for
     a candidates stage whose result is now stored is planned again, and the new misses run; until no plan waits
     for a stored result. A candidates result found damaged while planning is invalidated (with a warning) and
-    recomputed. ``get_client()`` is called only when something must run; ``log`` (print-like) gets one line per
-    round. Returns the final plans, the outcome of every task run, and the keys that were missing."""
+    recomputed. Tasks of forced stages (``Plan.forced``) run once per run even when cached. ``get_client()`` is
+    called only when something must run; ``log`` (print-like) gets, per round, one line per stage with tasks to
+    run and the first reason why (:func:`stages.status.run_lines`). Returns the final plans, the outcome of every
+    task run, and the keys that were missing."""
     outcome, missing_all = Outcome(), set()
     for round_no in range(sum(len(pl.stages) for pl in plans) + 2):  # each round plans at least one more stage
         plans = [_without_damaged(pl, log) for pl in plans]
-        missing = list({t.key: t for pl in plans for t in pl.missing() if t.key not in outcome.results}.values())
+        owner: dict[str, tuple[Task, Plan]] = {}
+        for pl in plans:
+            for t in pl.missing():
+                if t.key not in outcome.results:
+                    owner.setdefault(t.key, (t, pl))
+        missing = [t for t, _ in owner.values()]
         if missing:
             missing_all |= {t.key for t in missing}
             if log is not None:
-                counts: dict[str, int] = {}
-                for t in missing:
-                    counts[t.stage] = counts.get(t.stage, 0) + 1
-                what = ", ".join(f"{s} {n}" for s, n in counts.items())
-                log(f"running {len(missing)} task(s): {what}" if round_no == 0 else
-                    f"running {len(missing)} more task(s) now that the candidate pairs are known: {what}")
+                log(f"running {len(missing)} task(s):" if round_no == 0 else
+                    f"running {len(missing)} more task(s) now that the candidate pairs are known:")
+                for line in run_lines(list(owner.values())):
+                    log("  " + line)
+            forced = {k for k, (t, pl) in owner.items() if pl.is_forced(t)}
             done = execute(missing, plans[0].store, get_client(), quiet=quiet,
-                           key_suffix=key_suffix + (f"-round{round_no}" if round_no else ""), prior=outcome.results)
+                           key_suffix=key_suffix + (f"-round{round_no}" if round_no else ""), prior=outcome.results,
+                           forced=forced)
             outcome.results.update(done.results)
+            stored = {k for k, r in done.results.items() if r.status is TaskStatus.OK}
+            for pl in plans:
+                pl.recomputed |= stored & forced
             if done.corrupt():
                 break  # the caller invalidates the corrupt inputs and runs again
         ready = [any(pl.store.has(k) for k in pl.waiting().values()) for pl in plans]
         if not any(ready):
             break
-        plans = [build_plan(pl.pipeline) if r else pl for pl, r in zip(plans, ready)]
+        plans = [pl.again() if r else pl for pl, r in zip(plans, ready)]
     return plans, outcome, missing_all
 
 
@@ -246,7 +260,7 @@ def _without_damaged(plan: Plan, log) -> Plan:
         if log is not None:
             log(f"warning: {error}; recomputing it")
         plan.store.invalidate(key)
-    return build_plan(plan.pipeline)
+    return plan.again()
 
 
 _TMP_NAME = re.compile(r"^(trash-)?[0-9a-f]{32}$|^dask-worker-space$")

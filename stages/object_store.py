@@ -41,7 +41,7 @@ import numpy as np
 from .errors import CorruptEntry, UserError, warn_once
 from .store import (CACHE_MARKER, FORMAT_VERSION, KEY_PATTERN, _CACHE_NAMES, _READ_CACHE, Store, _chunks_for,
                     _copy_arrays, _decode, _encode, _fill_value, _json_default, _manifest_problem, array_checksum,
-                    claim_folder, file_checksum, manifest_checksum, read_checked_arrays)
+                    claim_folder, file_checksum, manifest_checksum, read_checked_arrays, same_content)
 
 # a write under objects/ that no manifest names and that is younger than this may belong to a task still
 # running (its manifest comes last): gc leaves it alone
@@ -317,20 +317,13 @@ class ObjectStore(Store):
         except FileExistsError:
             pass
         kept = self._quiet_manifest(key)
-        if kept is not None and _same_content(kept, manifest) and self._missing_parts(key, kept) is None:
+        if kept is not None and same_content(kept, manifest) and self._missing_parts(key, kept) is None:
             self._remove_quietly(self._data(key, manifest["location"]))  # same key, same content: stored once
             return kept
         # the one there is unusable, or holds other content (a result computed without some failed items, now
         # computed with them): replace it with one PUT; its data is left to gc
         self.fs.pipe_file(self._manifest_key(key), body)
         return manifest
-
-    def _quiet_manifest(self, key: str) -> dict | None:
-        warn, self.warn = self.warn, False
-        try:
-            return self.manifest(key)
-        finally:
-            self.warn = warn
 
     def _remove_quietly(self, path: str) -> None:
         try:
@@ -446,12 +439,6 @@ class ObjectStore(Store):
         if not re.match(rf"^{re.escape(self.base)}/objects/[0-9a-f]{{2}}/[0-9a-f]{{32}}/[0-9a-f]{{32}}$", what):
             raise ValueError(f"refusing to remove {what}: not a writer prefix of the cache {self._location}")
         self._remove_quietly(what)
-
-
-def _same_content(a: dict, b: dict) -> bool:
-    """True when two manifests of one key hold the same value: arrays, files, inline tree, and left-out items."""
-    return (all(a[f] == b[f] for f in ("tree", "arrays", "files"))
-            and a["info"].get("left_out", []) == b["info"].get("left_out", []))
 
 
 def _mtime(info: dict) -> float:

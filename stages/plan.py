@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import fingerprint, registry
+from . import fingerprint, registry, select
 from .config import DatasetSpec, GeneratedPath, InputRef, Pipeline, StageSpec, load_pipeline
 from .errors import CorruptEntry, PipelineError, warn_once
 from .fingerprint import code_fingerprint
@@ -137,6 +137,9 @@ class Plan:
     pending_generated: dict[str, str] = field(default_factory=dict)  # name -> why it is not usable yet
     hasher: "FileHasher | None" = None
     damaged_candidates: dict[str, str] = field(default_factory=dict)  # key -> error: stored but unreadable
+    forced: frozenset[str] = frozenset()    # stages recomputed even when cached (--force, see stages.select)
+    recomputed: set[str] = field(default_factory=set)  # keys of forced tasks this run has stored (run once)
+    untargeted: tuple[str, ...] = ()        # stages of the pipeline file left out: the targets do not need them
 
     def waiting(self) -> dict[str, str]:
         """{candidates stage: its task key} for every candidates stage some stage waits for."""
@@ -147,9 +150,22 @@ class Plan:
         return [t for sp in self.stages.values() for t in sp.tasks]
 
     def missing(self) -> list[Task]:
-        """Tasks without a usable result, and tasks whose result left out failed items (they run again after
-        those items are retried: cached at once if the same items fail, recomputed if they now succeed)."""
-        return [t for t in self.tasks() if not self.store.has(t.key) or any(e[0] for e in self.store.left_out(t.key))]
+        """Tasks without a usable result, tasks whose result left out failed items (they run again after
+        those items are retried: cached at once if the same items fail, recomputed if they now succeed), and
+        the tasks of forced stages this run has not recomputed yet."""
+        return [t for t in self.tasks() if self.is_forced(t) or not self.store.has(t.key)
+                or any(e[0] for e in self.store.left_out(t.key))]
+
+    def is_forced(self, task: Task) -> bool:
+        """True when ``task`` belongs to a forced stage and this run has not stored it yet."""
+        return task.stage in self.forced and task.key not in self.recomputed
+
+    def again(self) -> "Plan":
+        """The same pipeline planned again (after a round stored results, or entries were invalidated), with the
+        same targets and forced stages and what this run has already recomputed."""
+        plan = build_plan(self.pipeline)
+        plan.forced, plan.recomputed, plan.untargeted = self.forced, self.recomputed, self.untargeted
+        return plan
 
     def save_caches(self) -> None:
         """Write the input-file hashes and code fingerprints computed while planning (``run`` does)."""
@@ -180,11 +196,21 @@ def build_plan(pipe: Pipeline) -> Plan:
     return Plan(pipe, store, stages, datasets, pending, hasher, damaged)
 
 
-def plan_pipeline(path: str, overrides=(), cache_dir=None, output_dir=None, quiet=False) -> Plan:
+def plan_pipeline(path: str, overrides=(), cache_dir=None, output_dir=None, quiet=False, targets=(),
+                  force=()) -> Plan:
     """Read and validate the pipeline file ``path`` (with ``--set`` overrides) and plan it (``quiet`` is
-    accepted for symmetry with the commands; planning prints nothing)."""
-    pipe = load_pipeline(path, overrides, cache_dir=cache_dir, output_dir=output_dir)
-    return build_plan(pipe)
+    accepted for symmetry with the commands; planning prints nothing).
+
+    ``targets``: stage names; only they and the stages they need are planned (all stages when empty).
+    ``force``: stage names recomputed even when cached, with their downstream stages (see stages.select).
+    """
+    full = load_pipeline(path, overrides, cache_dir=cache_dir, output_dir=output_dir)
+    pipe = select.only(full, targets)
+    forced = select.forced(pipe, force, full)
+    plan = build_plan(pipe)
+    plan.forced = forced
+    plan.untargeted = tuple(n for n in full.stages if n not in pipe.stages)
+    return plan
 
 
 def _dataset_error(pipe: Pipeline, ds: DatasetSpec, msg: str, fix: str) -> PipelineError:

@@ -1,9 +1,10 @@
 """The record of a pipeline's last run, and the reasons a task will (re)run.
 
 Each run writes ``cache/runs/<pipeline-id>.json``: per stage the code fingerprint and its parts, the params,
-and per task its key and input digests, plus timings. ``--dry-run`` and ``status`` compare the planned
+and per task its key and input digests, plus timings. ``--dry-run``, ``status`` and ``run`` compare the planned
 tasks with this record to say *why* each cache miss runs: which param, which input item, or which
-project function changed.
+project function changed. The pipeline id names the pipeline, not where its file or the cache lie (see
+:func:`pipeline_id`), so the reasons stay right after a project or its cache is moved or copied.
 """
 from __future__ import annotations
 
@@ -13,13 +14,25 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
+from .config import Pipeline
 from .plan import Plan, SourceKind, Task
 from .store import digest_json, read_checked_json, write_checked_json
 
 
-def pipeline_id(plan_or_file) -> str:
-    path = plan_or_file if isinstance(plan_or_file, str) else plan_or_file.pipeline.file
-    return os.path.splitext(os.path.basename(path))[0] + "-" + digest_json(os.path.abspath(path))[:10]
+def pipeline_id(plan: "Plan | Pipeline") -> str:
+    """The pipeline's identity in a cache: ``<file stem>-<hash of its name>``.
+
+    Neither the folder of the pipeline file nor the cache's location is part of it: a project copied or moved
+    elsewhere (pipeline, data and cache together), or a cache copied, finds its records again. Two files with
+    the same stem and ``name:`` share it (they also share their output folder ``results/<name>``)."""
+    pipe = plan.pipeline if isinstance(plan, Plan) else plan
+    return os.path.splitext(os.path.basename(pipe.file))[0] + "-" + digest_json({"name": pipe.name})[:10]
+
+
+def legacy_pipeline_id(plan: "Plan | Pipeline") -> str:
+    """The id of caches written before :func:`pipeline_id` (it hashed the absolute path of the file): still read."""
+    pipe = plan.pipeline if isinstance(plan, Plan) else plan
+    return os.path.splitext(os.path.basename(pipe.file))[0] + "-" + digest_json(os.path.abspath(pipe.file))[:10]
 
 
 def record_path(plan: Plan) -> str:
@@ -27,12 +40,84 @@ def record_path(plan: Plan) -> str:
 
 
 def load_record(plan: Plan) -> dict | None:
-    """The last run's record, or None (also when the file is unusable: warned once, then rewritten)."""
-    record = read_checked_json(record_path(plan), "the reasons shown compare with no earlier run")
-    return record if record is not None and isinstance(record.get("stages"), dict) else None
+    """The last run's record, or None (also when the file is unusable: warned once, then rewritten).
+
+    A cache written before the pipeline id was location-free is read under its old id."""
+    for pid in (pipeline_id(plan), legacy_pipeline_id(plan)):
+        path = os.path.join(plan.store.root, "runs", pid + ".json")
+        record = read_checked_json(path, "the reasons shown compare with no earlier run")
+        if record is not None and isinstance(record.get("stages"), dict):
+            return record
+    return None
 
 
-def build_record(plan: Plan, summary: dict | None = None, extra: dict | None = None) -> dict:
+LEDGER_SUFFIX = ".keys.json"
+
+
+def ledger_path(plan: Plan) -> str:
+    """``cache/runs/<pipeline-id>.keys.json``: every entry and generated dataset the runs and sweeps of this
+    pipeline planned (what ``gc`` may remove on its behalf, and never on another pipeline's)."""
+    return os.path.join(plan.store.root, "runs", pipeline_id(plan) + LEDGER_SUFFIX)
+
+
+def note_keys(plan: Plan, keys, generated=()) -> None:
+    """Add ``keys`` (cache entries) and ``generated`` (folder names under ``cache/generated``) to the pipeline's
+    ledger (:func:`ledger_path`); written only when something is new. Two runs of one pipeline at once may drop
+    each other's additions: those entries then belong to no pipeline, which ``gc`` removes only with ``--all``."""
+    path = ledger_path(plan)
+    old = read_checked_json(path, "it is written again") or {}
+    known, known_gen = set(old.get("keys", [])), set(old.get("generated", []))
+    if set(keys) <= known and set(generated) <= known_gen and old.get("name") == plan.pipeline.name:
+        return
+    write_checked_json(path, {"pipeline": plan.pipeline.file, "name": plan.pipeline.name,
+                              "keys": sorted(known | set(keys)), "generated": sorted(known_gen | set(generated))})
+
+
+@dataclass
+class Owner:
+    """A pipeline as a cache knows it from its records: ``label`` (``name (file)``), the entries and generated
+    datasets its recorded runs reference."""
+    label: str
+    keys: set
+    generated: set
+
+
+def owners(store_root: str) -> dict[str, Owner]:
+    """{pipeline id: Owner} from every ledger and run record under ``cache/runs`` (a record alone, as written
+    before ledgers existed, references the keys of that pipeline's last run)."""
+    folder = os.path.join(store_root, "runs")
+    out: dict[str, Owner] = {}
+    for fn in sorted(os.listdir(folder)) if os.path.isdir(folder) else []:
+        if not fn.endswith(".json"):
+            continue
+        ledger = fn.endswith(LEDGER_SUFFIX)
+        pid = fn[:-len(LEDGER_SUFFIX)] if ledger else fn[:-5]
+        doc = read_checked_json(os.path.join(folder, fn), "gc treats its entries as belonging to no pipeline")
+        if not doc:
+            continue
+        label = f"{doc.get('name', pid)} ({os.path.basename(str(doc.get('pipeline', '?')))})"
+        owner = out.setdefault(pid, Owner(label, set(), set()))
+        if ledger:
+            owner.keys |= set(doc.get("keys", []))
+            owner.generated |= set(doc.get("generated", []))
+        else:
+            owner.keys |= {t.get("key") for st in doc.get("stages", {}).values() if isinstance(st, dict)
+                           for t in st.get("tasks", {}).values() if isinstance(t, dict)}
+    return out
+
+
+def sweep_record_files(plan: Plan) -> list[str]:
+    """The files under ``cache/sweeps/`` that record sweeps of this pipeline (see stages.sweep.sweep_path)."""
+    folder = os.path.join(plan.store.root, "sweeps")
+    prefixes = tuple(pid + "-" for pid in (pipeline_id(plan), legacy_pipeline_id(plan)))
+    names = sorted(os.listdir(folder)) if os.path.isdir(folder) else []
+    return [os.path.join(folder, fn) for fn in names if fn.startswith(prefixes) and fn.endswith(".json")]
+
+
+def build_record(plan: Plan, summary: dict | None = None, extra: dict | None = None,
+                 previous: dict | None = None) -> dict:
+    """The record of a run of ``plan``; the stages it left out (``Plan.untargeted``: a run of some targets) keep
+    their entry of the ``previous`` record, so later reasons compare them with the run that last planned them."""
     stages = {}
     for name, sp in plan.stages.items():
         stages[name] = {
@@ -40,6 +125,8 @@ def build_record(plan: Plan, summary: dict | None = None, extra: dict | None = N
             "params": sp.spec.params, "input_items": sp.input_items,
             "tasks": {t.label: {"key": t.key, "inputs": t.input_digests} for t in sp.tasks},
         }
+    earlier = (previous or {}).get("stages", {})
+    stages.update({n: earlier[n] for n in plan.untargeted if n in earlier})
     rec = {"pipeline": plan.pipeline.file, "name": plan.pipeline.name, "time": time.time(),
            "overrides": plan.pipeline.overrides, "params": plan.pipeline.params, "stages": stages,
            "summary": summary or {}}
@@ -95,13 +182,15 @@ MISSING_TEXT = {"missing": "result missing from the cache (deleted or found corr
 class Reason:
     """Why a task will run, compared with the last recorded run (after Snakemake's ``Reason``).
 
-    Each field is one component: ``new`` (nothing recorded: "pipeline", "stage", "item", "tile" or "task"),
+    Each field is one component: ``forced`` (the stage was named by ``--force``, or is downstream of one that
+    was: recomputed even when cached), ``new`` (nothing recorded: "pipeline", "stage", "item", "tile" or "task"),
     ``missing`` (same key but no usable result: "missing" or "corrupt"), ``function`` ((old, new) name),
     ``code`` (project functions/constants whose fingerprint changed) and ``code_gone`` (no longer used),
     ``params`` ((name, old, new)), ``inputs`` (:class:`InputChange`), ``generated`` (the stage waits for a
     generated dataset that ``run`` writes first; ``detail`` says why it is not usable yet).
     :meth:`text` is the one place a reason becomes words.
     """
+    forced: bool = False
     new: str = ""
     missing: str = ""
     function: tuple[str, str] | None = None
@@ -114,6 +203,8 @@ class Reason:
     detail: str = ""
 
     def text(self) -> str:
+        if self.forced:
+            return "forced"
         if self.generated:
             return f"dataset '{self.generated}' is generated by run first ({self.detail or 'not generated yet'})"
         if self.new:
@@ -172,8 +263,10 @@ def _new_kind(task: Task, fanout: str) -> str:
 
 
 def explain(task: Task, plan: Plan, record: dict | None) -> Reason:
-    """Why ``task`` (a cache miss) will run, compared with the last recorded run."""
+    """Why ``task`` (a cache miss, or a task of a forced stage) will run, compared with the last recorded run."""
     sp = plan.stages[task.stage]
+    if plan.is_forced(task):
+        return Reason(forced=True)
     if record is None:
         return Reason(new="pipeline")
     prev_stage = record["stages"].get(task.stage)

@@ -16,9 +16,9 @@ import warnings
 from .errors import CorruptEntry, UserError
 from .execute import clean_tmp, execute_rounds
 from .generated import write_generated
-from .plan import Plan, build_plan, plan_pipeline
+from .plan import Plan, plan_pipeline
 from .publish import publish, verify_published
-from .record import build_record, load_record, save_record
+from .record import build_record, load_record, note_keys, save_record
 from .results import metrics
 from .session import client_session, given_client, stderr_log
 from .status import dry_run, format_dry_run
@@ -68,22 +68,32 @@ def prepare(plan: Plan, log) -> Plan:
                             "`run --dry-run` work on a read-only cache")
     if plan.pending_generated:
         write_generated(plan.pipeline, plan.store, sorted(plan.pending_generated), log)
-        plan = build_plan(plan.pipeline)
+        plan = plan.again()
     plan.save_caches()
     return plan
 
 
+def generated_names(plan: Plan) -> list[str]:
+    """The folder names under ``cache/generated`` of the generated datasets ``plan`` uses."""
+    return [os.path.basename(g.path) for g in plan.pipeline.generated.values() if g.path]
+
+
 def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None, dry: bool = False,
         cache_dir: str | None = None, output_dir: str | None = None, quiet: bool = False,
-        summary_json: str | None = None, client_getter=None, max_repairs: int = 2) -> dict:
+        summary_json: str | None = None, client_getter=None, max_repairs: int = 2, targets=(),
+        force=()) -> dict:
     """Run a pipeline: compute the cache misses, publish outputs, record the run.
 
+    ``targets``: stage names; only they and the stages they need run (and are published); ``metrics.json`` is
+    written by runs of the whole pipeline only. ``force``: stage names recomputed, with their downstream stages,
+    even when cached (the stored results are replaced, see Store.put). Before executing, one line per stage says
+    how many tasks run and why (see stages.status.run_lines); ``quiet`` drops it (failures are still printed).
     Returns the summary dict (per stage: tasks, executed, cached, failed, skipped, seconds).
     Raises RunFailed when a task failed (after everything else finished and was stored).
     """
     log = stderr_log(quiet)
     t0 = time.time()
-    plan = plan_pipeline(path, overrides, cache_dir, output_dir, quiet)
+    plan = plan_pipeline(path, overrides, cache_dir, output_dir, quiet, targets=targets, force=force)
     if dry:
         rows = dry_run(plan)
         print(format_dry_run(plan, rows))
@@ -112,7 +122,7 @@ def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None,
                 warnings.warn(f"{error}; recomputing it", stacklevel=1)
                 log(f"warning: {error}; recomputing it")
                 plan.store.invalidate(key)
-            plan = build_plan(plan.pipeline)
+            plan = plan.again()
     try:
         published = publish(plan, log, verified)
     except CorruptEntry as exc:  # changed while this run was publishing
@@ -124,12 +134,13 @@ def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None,
                             for r in results.values() if r.status is TaskStatus.FAILED],
                "skipped": [r.display for r in results.values() if r.status is TaskStatus.SKIPPED],
                "wall_seconds": round(time.time() - t0, 3), "published": len(published)}
-    record = build_record(plan, summary)
+    record = build_record(plan, summary, previous=record_before)
     if record_before and not any(s["executed"] for s in summary["stages"].values()):
         record["summary"] = record_before.get("summary", summary) | {"last_noop": summary["wall_seconds"]}
     save_record(plan, record)
+    note_keys(plan, [t.key for t in plan.tasks()], generated_names(plan))
     m = metrics(plan)  # also when items failed: the metrics then list the items they left out (_left_out)
-    if m:
+    if m and not plan.untargeted:  # a run of some targets does not replace the whole pipeline's metrics
         try:
             atomic_write_text(os.path.join(plan.pipeline.output_dir, "metrics.json"),
                               json.dumps(m, indent=2, default=str))

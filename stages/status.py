@@ -1,7 +1,7 @@
 """What a run would execute and why (``run --dry-run``, ``status``); runs and writes nothing."""
 from __future__ import annotations
 
-from .plan import Plan, plan_pipeline
+from .plan import Plan, Task, plan_pipeline
 from .record import load_record, pending_reason, reason
 
 
@@ -22,6 +22,25 @@ def dry_run(plan: Plan) -> list[dict]:
         rows += [{"stage": t.stage, "label": t.label, "key": t.key, "reason": reason(t, plan, record)}
                  for t in sp.tasks if t.key in missing]
     return rows
+
+
+def run_lines(tasks: list[tuple[Task, Plan]]) -> list[str]:
+    """What ``run`` prints before executing ``tasks`` ((task, its plan) pairs): one line per stage, its number of
+    tasks and the first reason, compared with the plan's last recorded run (as Snakemake prints a reason per
+    job), e.g. ``dense_refine: 20 tasks (code changed: corr_core.dense.deform.refine_deform)``; when the tasks of a
+    stage run for several reasons, how many others (``--dry-run`` lists them all)."""
+    records: dict[int, dict | None] = {}
+    reasons: dict[str, list[str]] = {}
+    for task, plan in tasks:
+        if id(plan) not in records:
+            records[id(plan)] = load_record(plan)
+        reasons.setdefault(task.stage, []).append(reason(task, plan, records[id(plan)]))
+    lines = []
+    for stage, why in reasons.items():
+        others = len(set(why)) - 1
+        more = f"; and {others} other reason{'s' if others > 1 else ''}: see --dry-run" if others else ""
+        lines.append(f"{stage}: {len(why)} task{'s' if len(why) != 1 else ''} ({why[0]}{more})")
+    return lines
 
 
 def waiting_reason(plan: Plan, stage: str) -> str:

@@ -438,13 +438,17 @@ class Store:
         """Store ``value`` (and the files in ``files_dir``) under ``key``; returns the manifest.
 
         Data is written to a private temporary folder and renamed into place; the manifest is written
-        last and atomically, so a kill at any point leaves either a complete entry or none.
+        last and atomically, so a kill at any point leaves either a complete entry or none. Replacing an entry
+        with other content (a forced recompute, a result now computed with items it left out) first removes
+        the old manifest: a reader sees the old entry, then none, then the new one, never the old manifest
+        over the new data.
         """
         import zarr
 
         arrays: dict[str, np.ndarray] = {}
         tree = _encode(value, arrays)
         checksums = {}
+        tmp = None
         if arrays:
             tmp = os.path.join(self.tmp_dir(), "data")
             os.makedirs(tmp)
@@ -458,7 +462,6 @@ class Store:
                     zarr.create_array(store=store, shape=arr.shape, dtype=arr.dtype,
                                       chunks=tuple(max(1, c) for c in arr.shape), fill_value=_fill_value(arr.dtype))
                 checksums[name] = {"sha": array_checksum(arr), "shape": list(arr.shape), "dtype": str(arr.dtype)}
-            self._move_into_place(tmp, self.object_path(key))
         files = {}
         if files_dir and os.path.isdir(files_dir):
             for dirpath, _, filenames in os.walk(files_dir):
@@ -466,14 +469,33 @@ class Store:
                     full = os.path.join(dirpath, fn)
                     files[os.path.relpath(full, files_dir)] = {"sha": file_checksum(full),
                                                                "size": os.path.getsize(full)}
-            self._move_into_place(files_dir, self.files_path(key))
         manifest = {"format": FORMAT_VERSION, "key": key, "created": time.time(), "tree": tree,
                     "arrays": checksums, "files": files, "info": info or {}}
         manifest = json.loads(json.dumps(manifest, default=_json_default))  # the form a reader sees
         manifest["checksum"] = manifest_checksum(manifest)
+        if self.manifest_exists(key):
+            old = self._quiet_manifest(key)
+            if old is None or not same_content(old, manifest):
+                self.invalidate(key)  # the old entry is gone before its data is replaced
+        if tmp is not None:
+            self._move_into_place(tmp, self.object_path(key))
+        elif os.path.exists(self.object_path(key)):  # arrays of an earlier entry under this key: not this one's
+            self.discard(self.object_path(key))
+        if files_dir and os.path.isdir(files_dir):
+            self._move_into_place(files_dir, self.files_path(key))
+        elif os.path.exists(self.files_path(key)):
+            self.discard(self.files_path(key))
         _MANIFESTS.pop(self.manifest_path(key), None)
         atomic_write_text(self.manifest_path(key), json.dumps(manifest))
         return manifest
+
+    def _quiet_manifest(self, key: str) -> dict | None:
+        """:meth:`manifest` without the warning for an unusable one (the caller replaces it)."""
+        warn, self.warn = self.warn, False
+        try:
+            return self.manifest(key)
+        finally:
+            self.warn = warn
 
     def _move_into_place(self, src: str, dst: str) -> None:
         """Rename ``src`` to ``dst``, first moving aside any stale ``dst`` (from an invalidated entry)."""
@@ -572,6 +594,12 @@ def _disk_usage(path: str) -> int:
             except OSError:
                 pass
     return total
+
+
+def same_content(a: dict, b: dict) -> bool:
+    """True when two manifests of one key hold the same value: arrays, files, inline tree, and left-out items."""
+    return (all(a[f] == b[f] for f in ("tree", "arrays", "files"))
+            and a["info"].get("left_out", []) == b["info"].get("left_out", []))
 
 
 def manifest_checksum(doc: dict) -> str:

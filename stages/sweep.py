@@ -9,9 +9,9 @@ import time
 from .errors import PipelineError
 from .execute import execute_rounds
 from .plan import plan_pipeline
-from .record import pipeline_id
+from .record import note_keys, pipeline_id
 from .results import metrics, scalar_metrics
-from .run import prepare
+from .run import generated_names, prepare
 from .session import client_session, stderr_log
 from .status import dry_run, format_dry_run
 from .store import digest_json, write_checked_json
@@ -30,14 +30,16 @@ def parse_grid(grids: list[str]) -> list[list[str]]:
     return [list(p) for p in itertools.product(*axes)]
 
 
-def sweep_path(store_root: str, path: str, grids: list[str], overrides) -> str:
-    """The record of one sweep: ``<cache>/sweeps/<pipeline-id>-<hash of grid and overrides>.json``."""
-    sweep_id = pipeline_id(path) + "-" + digest_json([grids, list(overrides)])[:8]
-    return os.path.join(store_root, "sweeps", sweep_id + ".json")
+def sweep_path(plan, grids: list[str], overrides) -> str:
+    """The record of one sweep of ``plan``'s pipeline: ``<cache>/sweeps/<pipeline-id>-<hash of grid and
+    overrides>.json`` (see stages.record.pipeline_id)."""
+    sweep_id = pipeline_id(plan) + "-" + digest_json([grids, list(overrides)])[:8]
+    return os.path.join(plan.store.root, "sweeps", sweep_id + ".json")
 
 
 def sweep(path: str, grids: list[str], overrides=(), workers: int = 2, scheduler: str | None = None,
-          cache_dir=None, quiet=False, dry: bool = False, metric_keys: list[str] | None = None) -> dict:
+          cache_dir=None, quiet=False, dry: bool = False, metric_keys: list[str] | None = None, targets=(),
+          force=()) -> dict:
     """Run every grid point (all points' misses in one task graph) and collect their metrics.
 
     Results are stored under their own keys, so points never overwrite each other, and an interrupted
@@ -46,30 +48,34 @@ def sweep(path: str, grids: list[str], overrides=(), workers: int = 2, scheduler
     returns {"dry_run": [{"point": {key: value}, "to_run": n, "report": dry-run text}]}.
     ``metric_keys``: the headline columns (dotted keys or glob patterns; default: the plugins' choice, see
     :func:`headline_columns`), returned with their directions under "headline" for :func:`format_table`.
+    ``targets`` and ``force``: as for ``run`` (stages.select), at every grid point; a task shared by several
+    points is recomputed once.
     """
     log = stderr_log(quiet)
     points = parse_grid(grids)
     if dry:
         out = []
         for p in points:
-            plan = plan_pipeline(path, list(overrides) + p, cache_dir, None, quiet=True)
+            plan = plan_pipeline(path, list(overrides) + p, cache_dir, None, quiet=True, targets=targets, force=force)
             rows = dry_run(plan)
             out.append({"point": dict(x.split("=", 1) for x in p), "to_run": sum(r["key"] is not None for r in rows),
                         "report": format_dry_run(plan, rows)})
         return {"dry_run": out}
-    plans = [prepare(plan_pipeline(path, list(overrides) + p, cache_dir, None, quiet=True), log) for p in points]
+    plans = [prepare(plan_pipeline(path, list(overrides) + p, cache_dir, None, quiet=True, targets=targets,
+                                   force=force), log) for p in points]
     store = plans[0].store
     missing = [t for pl in plans for t in pl.missing()]
-    log(f"sweep: {len(points)} point(s), {len(missing)} task(s) to run")
+    log(f"sweep: {len(points)} point(s), {len({t.key for t in missing})} task(s) to run")
     failures = []
     if missing or any(pl.waiting() for pl in plans):  # in rounds: stages waiting for candidates run once known
         with client_session(workers, scheduler, store.root, log) as get_client:
-            plans, outcome, _ = execute_rounds(plans, get_client, quiet=quiet)
+            plans, outcome, _ = execute_rounds(plans, get_client, quiet=quiet, log=log)
         failures = [{"stage": r.stage, "item": r.label, "error": r.error} for r in outcome.failed()]
+    note_keys(plans[0], [t.key for pl in plans for t in pl.tasks()], [g for pl in plans for g in generated_names(pl)])
     rows = [{"point": dict(x.split("=", 1) for x in p), "metrics": metrics(pl)} for p, pl in zip(points, plans)]
     result = {"pipeline": os.path.abspath(path), "grid": grids, "overrides": list(overrides), "rows": rows,
               "failures": failures, "time": time.time(), "headline": headline_columns(plans[0], rows, metric_keys)}
-    record = sweep_path(store.root, path, grids, overrides)
+    record = sweep_path(plans[0], grids, overrides)
     write_checked_json(record, json.loads(json.dumps(result, default=str)))
     figure = os.path.join(plans[0].pipeline.output_dir, "sweeps", os.path.basename(record)[:-5] + ".png")
     result["figure"] = plot_sweep(rows, figure, first=result["headline"]["columns"])

@@ -47,6 +47,7 @@ class TaskCall:
     item_name: str | None
     cache: str                  # the store's root folder
     display: str                # "stage[label]"
+    force: bool = False         # recompute and replace the stored result even when it is there (--force)
 
 
 @dataclass(frozen=True)
@@ -160,7 +161,7 @@ def run_task(call: TaskCall, *upstream: TaskResult) -> TaskResult:
         return base.with_status(TaskStatus.SKIPPED, because=skip.because, error=skip.error)
     failed = {u.key: u for u in upstream if isinstance(u, TaskResult) and not u.status.succeeded}
     store = Store(call.cache, warn=False)  # the client warns about unusable entries
-    if store.has(call.key):
+    if not call.force and store.has(call.key):
         stored = tuple(tuple(e) for e in store.left_out(call.key))
         if stored == left_out:  # complete, or left out the same items as now
             return base.with_status(TaskStatus.CACHED, left_out=stored)

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from typing import Iterable
 
 from ..plan import Plan, plan_pipeline
-from ..record import load_record, pipeline_id
+from ..record import load_record, sweep_record_files
 from ..results import metrics as pipeline_metrics
 from ..store import read_checked_json
 from .headline import HeadlineTable, headline_tables
@@ -119,9 +119,8 @@ def metric_origins(plan: Plan) -> dict[str, str]:
 
 def load_sweeps(plan: Plan) -> list[dict]:
     """The recorded sweeps of this pipeline file, oldest first (each with its file name under "_file")."""
-    pattern = os.path.join(plan.store.root, "sweeps", glob.escape(pipeline_id(plan)) + "-*.json")
     out = []
-    for path in glob.glob(pattern):
+    for path in sweep_record_files(plan):
         sw = read_checked_json(path, "the report leaves this sweep out")
         if sw is None:
             continue

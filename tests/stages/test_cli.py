@@ -152,8 +152,9 @@ def test_code_change_reruns_only_dependent_stages(tmp_path):
     (plug / "myplugin.py").write_text(PLUGIN.replace("x * 2.0", "x * 3.0"))
     res = cli(["run", "p.yaml", "--dry-run"], cwd=tmp_path, env=env)
     assert "doubled: 8 of 8 task(s) would run" in res.stdout and "code changed: myplugin.helper" in res.stdout
-    res = cli(["run", "p.yaml", "--summary-json", "b.json", "--quiet"], cwd=tmp_path, env=env)
+    res = cli(["run", "p.yaml", "--summary-json", "b.json"], cwd=tmp_path, env=env)
     assert res.returncode == 0, res.stderr
+    assert "doubled: 8 tasks (code changed: myplugin.helper)" in res.stderr   # run says why, too
     ex = _executed(_summary(tmp_path / "b.json"))
     assert ex == {"feat": 0, "dist": 0, "summary": 0, "rep": 0, "doubled": 8, "total": 1}
 
@@ -166,3 +167,24 @@ def test_pipeline_on_an_external_dask_cluster(tmp_path):
         assert _executed(_summary(tmp_path / "s.json"))["feat"] == 10
         manifests = [json.loads(p.read_text()) for p in (tmp_path / "cache" / "manifest").rglob("*.json")]
         assert len({m["info"]["pid"] for m in manifests}) == 2  # both external workers did work
+
+
+def test_version_and_the_stages_console_script(tmp_path):
+    """``--version`` prints the package version; pyproject.toml declares a ``stages`` script that is the CLI."""
+    import importlib
+    import tomllib
+
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    version = pyproject["project"]["version"]
+    res = cli(["--version"], cwd=tmp_path)
+    assert res.returncode == 0 and res.stdout.strip() == f"stages {version}", res
+    module, _, func = pyproject["project"]["scripts"]["stages"].partition(":")
+    main = getattr(importlib.import_module(module), func)
+    make_project(tmp_path, n=4)
+    script = ("import sys; sys.argv[0] = 'stages'; "
+              f"from {module} import {func}; sys.exit({func}())")   # what the installed script does
+    res = subprocess.run([sys.executable, "-c", script, "run", "p.yaml", "summary", "--workers", "0"], cwd=tmp_path,
+                         env={**os.environ, **plugins_env()}, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert "summary: 1 task (no earlier run of this pipeline)" in res.stderr and "rep" not in res.stdout
+    assert callable(main)

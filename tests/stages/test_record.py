@@ -67,3 +67,40 @@ def test_explain_a_new_item(plan_and_record, tmp_path):
     record = load_record(plan)
     task = next(t for t in plan.tasks() if t.stage == "feat" and t.label == "s999")
     assert explain(task, plan, record).new == "item"
+
+
+def _reasons(path: str, overrides=(), cache_dir=None) -> dict[str, str]:
+    """{stage: reason} of the tasks a run of ``path`` would execute."""
+    return {r["stage"]: r["reason"] for r in api.dry_run(api.plan_pipeline(path, list(overrides), cache_dir))}
+
+
+def test_reasons_survive_a_moved_or_copied_project_or_cache(tmp_path, monkeypatch):
+    """After copying the whole project (pipeline, data and cache) or only the cache elsewhere, every task is still
+    a hit and the reasons compare with the last run there, not "no earlier run of this pipeline"."""
+    import shutil
+
+    from tests.helpers import run_quiet
+
+    first = tmp_path / "first"
+    monkeypatch.chdir(make_project(first, n=6).parent)
+    run_quiet(first / "p.yaml")
+    expected = {"summary": "param sigma: 1.0 -> 2.0", "rep": "input summary (summary) changed"}
+    assert _reasons("p.yaml", ["sigma=2"]) == expected
+    shutil.copytree(first, tmp_path / "copy")                      # the project, as cloned to another machine
+    monkeypatch.chdir(tmp_path / "copy")
+    assert _reasons("p.yaml", ["sigma=2"]) == expected
+    shutil.move(str(tmp_path / "copy" / "cache"), tmp_path / "moved_cache")   # the cache alone, elsewhere
+    assert _reasons("p.yaml", ["sigma=2"], str(tmp_path / "moved_cache")) == expected
+    assert _reasons("p.yaml", [], str(tmp_path / "moved_cache")) == {}     # still every task a hit
+
+
+def test_a_record_written_under_the_old_pipeline_id_is_still_read(plan_and_record):
+    """Caches written before the pipeline id left out the file's folder keep their reasons after the upgrade."""
+    from stages.record import legacy_pipeline_id, record_path
+
+    path, plan = plan_and_record
+    old = os.path.join(plan.store.root, "runs", legacy_pipeline_id(plan) + ".json")
+    os.replace(record_path(plan), old)
+    after = api.plan_pipeline(path, ["sigma=3"], quiet=True)
+    summary = next(t for t in after.tasks() if t.stage == "summary")
+    assert explain(summary, after, load_record(after)).params == (("sigma", 1.0, 3.0),)

@@ -137,3 +137,27 @@ def test_engine_writes_only_under_cache_and_output(project, dask_client, tmp_pat
     assert sorted(os.listdir(tmp_path)) == ["cache", "data", "p.yaml", "results"]
     assert (tmp_path / "results" / "syn" / "rep" / "summary.txt").is_file()
     assert (tmp_path / "results" / "syn" / "metrics.json").is_file()
+
+
+def test_run_says_why_each_stage_runs(project, tmp_path, capsys):
+    """One line per stage that executes anything: its number of tasks and the first reason."""
+    api.run(str(project), workers=0)
+    assert "  feat: 12 tasks (no earlier run of this pipeline)" in capsys.readouterr().err
+    api.run(str(project), workers=0, overrides=["sigma=2"])
+    err = capsys.readouterr().err
+    assert "  summary: 1 task (param sigma: 1.0 -> 2.0)" in err
+    assert "  rep: 1 task (input summary (summary) changed)" in err
+    assert "feat:" not in err.replace("feat: 0", "")   # a stage that executes nothing gets no line
+    (tmp_path / "data" / "s003.txt").write_text("edited\n")
+    (tmp_path / "data" / "s100.txt").write_text("new\n")
+    api.run(str(project), workers=0, overrides=["sigma=2"])
+    err = capsys.readouterr().err
+    assert "  feat: 2 tasks (input path (items[s003]) changed; and 1 other reason: see --dry-run)" in err
+
+
+def test_quiet_run_keeps_failures_and_drops_reasons(project, tmp_path, capsys):
+    (tmp_path / "data" / "s003.txt").write_text("BROKEN marker\n")
+    with pytest.raises(api.RunFailed):
+        api.run(str(project), workers=0, quiet=True, overrides=["feat.fail_on=BROKEN"])
+    err = capsys.readouterr().err
+    assert "FAILED feat[s003]" in err and "tasks (" not in err and "running" not in err
