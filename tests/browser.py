@@ -56,9 +56,15 @@ function name(el) {
   const text = (el.getAttribute('title') || el.textContent || '').trim().replace(/\\s+/g, ' ').slice(0, 40);
   return el.tagName.toLowerCase() + (el.className ? '.' + el.className : '') + ' "' + text + '"';
 }
+function folded(el) {   // inside a closed <details> (its own <summary> is shown)
+  for (let d = el.parentElement; d; d = d.parentElement) {
+    if (d.tagName === 'DETAILS' && !d.open && !(el.tagName === 'SUMMARY' && el.parentElement === d)) return true;
+  }
+  return false;
+}
 const els = Array.from(document.querySelectorAll(SEL)).filter(el => {
   const r = el.getBoundingClientRect();
-  return r.width > 0 && r.height > 0 && getComputedStyle(el).visibility !== 'hidden';
+  return r.width > 0 && r.height > 0 && getComputedStyle(el).visibility !== 'hidden' && !folded(el);
 });
 const boxes = els.map(clipped);
 const overlaps = [];
@@ -134,10 +140,11 @@ def check_page(html_path: str | os.PathLike, screenshot: str | os.PathLike | Non
     driver = webdriver.Chrome(service=Service(_which(DRIVERS)), options=opts)
     try:
         driver.set_page_load_timeout(120)
+        # the viewport itself is ``window`` (the window size includes the browser frame in some versions, and a
+        # window has a minimum width): a phone's viewport is emulated as a phone (a touch screen, mobile layout)
+        driver.execute_cdp_cmd("Emulation.setDeviceMetricsOverride", {
+            "width": window[0], "height": window[1], "deviceScaleFactor": 1, "mobile": window[0] < 600})
         driver.get(Path(html_path).resolve().as_uri())
-        # the window size includes the browser frame in some versions: make the viewport itself ``window``
-        inner = driver.execute_script("return [window.innerWidth, window.innerHeight];")
-        driver.set_window_size(2 * window[0] - inner[0], 2 * window[1] - inner[1])
         out = PageCheck(window=tuple(window))
         out.console_errors = [e["message"] for e in driver.get_log("browser") if e.get("level") == "SEVERE"]
         out.broken_images = list(driver.execute_script(BROKEN_IMAGES_JS))
