@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from . import registry
-from .errors import CorruptEntry
+from .errors import CorruptEntry, configure_logging
 from .inputs import (DictInput, InputError, InputSpec, PairsInput, SparsePairsInput, StackInput, ValueInput,
                      partial_pairs, partial_tile)
 from .store import Store
@@ -178,6 +178,7 @@ def run_task(call: TaskCall, *upstream: TaskResult) -> TaskResult:
     if "out_dir" in fn.engine_args:
         out_dir = store.tmp_dir()
         kwargs["out_dir"] = out_dir
+    configure_logging()   # what the function logs (e.g. a mesh repair) reaches stderr as one line
     t0 = time.perf_counter()
     try:
         value = _call(fn, call, inputs, kwargs, failed)
