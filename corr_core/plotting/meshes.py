@@ -177,6 +177,15 @@ LABEL_PT = 9.0                     # landmark numbers and legend, in points
 RIGHT, WRONG, TRUE_EDGE = "#22aa33", "#dd2222", "#1f5fbf"
 
 
+def fit_title(text: str, width_in: float, fontsize: float) -> str:
+    """``text`` wrapped onto lines that fit a figure ``width_in`` inches wide at ``fontsize`` points (about 0.62 em
+    per character), each existing line on its own, so a long title is never cut at the figure's edges."""
+    import textwrap
+
+    chars = max(20, int(width_in * 72 / (0.62 * fontsize)))
+    return "\n".join(part for line in text.split("\n") for part in textwrap.wrap(line, chars) or [""])
+
+
 def view_name(view: int, n_views: int = 8) -> str:
     """How a figure names camera ``view`` of ``n_views`` (azimuth view * 360 / n_views degrees; 0: the front)."""
     az = view * 360.0 / n_views
@@ -345,8 +354,11 @@ def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, pred
         lax.text(0.02, 0.5, "\n".join(f"{i + 1:>2} {n}" for i, n in enumerate(names)), fontsize=LABEL_PT,
                  va="center", ha="left", family="monospace", transform=lax.transAxes)
     cameras = "" if n_cols == n_panels else f" ({view_name(views[0], n_views)})"
-    fig.suptitle(title + cameras + "\ngreen: right; red x: wrong, a red line to the true landmark (blue ring); "
-                 "faint: hidden from this side", fontsize=10)
+    suptitle = fit_title(title + cameras + "\ngreen: right; red x: wrong, a red line to the true landmark (blue "
+                         "ring); faint: hidden from this side", fig.get_figwidth(), 10)
+    fig.suptitle(suptitle, fontsize=10)
+    if suptitle.count("\n") > 1:   # more title lines than planned: make room above the panels
+        grid.update(top=1 - (0.3 + 0.2 * suptitle.count("\n")) / fig.get_figheight())
     fig.savefig(path, dpi=90)
     drawn = _drawn(fig, [(ax, title_of(k)) for k, ax in enumerate(a for a, *_ in labelled)])
     plt.close(fig)
@@ -394,15 +406,19 @@ def plot_dense_panels(template: tuple, poses: dict, vertex_maps: dict, captions:
     box = crop_box([p[2] for p in panels])
     aspect = (box[1].stop - box[1].start) / (box[0].stop - box[0].start) if box[0].start is not None else 1.0
     aspect = max(aspect, 0.8)   # room for the titles
-    fig, axes = plt.subplots(len(views), len(columns), figsize=(2.7 * aspect * len(columns) + 0.4,
-                                                                2.9 * len(views)), squeeze=False)
+    width = 2.7 * aspect * len(columns) + 0.6
+    suptitle = fit_title(title, width, 10)
+    top = 0.25 + 0.2 * (suptitle.count("\n") + 1)      # inches above the panels for the title
+    fig, axes = plt.subplots(len(views), len(columns), figsize=(width, 2.9 * len(views) + top), squeeze=False)
     for k, (name, r, image) in enumerate(panels):
         ax = axes[r, k // len(views)]
         _show(ax, image, box)
         if r == 0:
-            ax.set_title(name + (f"\n{captions[name]}" if name in captions else ""), fontsize=8)
-    fig.suptitle(title, fontsize=9)
-    fig.tight_layout(rect=(0, 0, 1, 0.93))
+            ax.set_title(name + (f"\n{captions[name]}" if name in captions else ""), fontsize=9)
+        if k < len(views):
+            ax.set_ylabel(view_name(views[r], n_views), fontsize=9)
+    fig.suptitle(suptitle, fontsize=10)
+    fig.tight_layout(rect=(0, 0, 1, 1 - top / fig.get_figheight()))
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     fig.savefig(path, dpi=90)
     plt.close(fig)

@@ -44,8 +44,8 @@ nav li{display:inline-block;margin-right:1.1em}
 .problem{display:flex;flex-wrap:wrap;gap:.6em 1.2em;align-items:flex-start;border-top:1px solid #dde;padding:.4em 0}
 .ptable{flex:0 1 auto;min-width:0;max-width:100%}.ptable h3{margin:.1em 0 .3em 0;font-size:1em}
 .ptable .tscroll{margin:.2em 0}
-.pfigs{display:flex;flex-wrap:wrap;gap:.6em;flex:1 1 480px;justify-content:flex-start;min-width:0;max-width:100%}
-figure.thumb{padding:.2em;flex:0 1 auto;min-width:0}figure.thumb img{max-height:420px;max-width:100%}
+.pfigs{display:flex;flex-wrap:wrap;gap:.6em;flex:1 1 auto;justify-content:flex-start;min-width:0;max-width:100%}
+figure.thumb{padding:.2em;flex:0 1 auto;min-width:0}figure.thumb img{max-height:720px;max-width:100%}
 figure.thumb figcaption{font-size:.8em;margin-top:.1em}
 figure.pointer{border-style:dashed;color:#555}
 table.summary-table{font-size:.86em;margin:0}table.summary-table td,table.summary-table th{padding:.12em .45em}

@@ -154,3 +154,19 @@ def test_landmark_figure_one_known_mistake(tmp_path):
                 a, b = boxes[i], boxes[j]
                 overlap = min(a[2], b[2]) - max(a[0], b[0]), min(a[3], b[3]) - max(a[1], b[1])
                 assert min(overlap) <= 0.5, f"{panel}: labels {i + 1} and {j + 1} overlap"
+
+
+@pytest.mark.parametrize("width", [2.5, 4.0, 9.0])
+def test_long_titles_are_wrapped_inside_the_figure(width):
+    """A one-pose dense figure is narrow: its long title is wrapped, not cut at the figure's edges."""
+    from corr_core.plotting.charts import pyplot
+
+    plt = pyplot()
+    fig = plt.figure(figsize=(width, 3))
+    title = ("dense_auto: template coordinates as RGB, pulled back through the dense map (best .. worst pose)"
+             "\ngreen: right; red x: wrong, a red line to the true landmark (blue ring); faint: hidden from this side")
+    text = fig.suptitle(pm.fit_title(title, width, 10), fontsize=10)
+    fig.canvas.draw()
+    box, page = text.get_window_extent(), fig.bbox
+    plt.close(fig)
+    assert box.x0 >= page.x0 and box.x1 <= page.x1
