@@ -133,7 +133,7 @@ def figure_link(ctx: ReportContext, rel: str) -> str:
         href = os.path.relpath(target, os.path.dirname(os.path.abspath(ctx.out_path)))
     except ValueError:   # another drive (Windows)
         href = os.path.abspath(target)
-    return "/".join(quote(part) for part in href.replace(os.sep, "/").split("/"))
+    return "/".join(quote(part, safe="=,+") for part in href.replace(os.sep, "/").split("/"))
 
 
 def figure_html(ctx: ReportContext, rel: str, thumb: bool = False) -> str:

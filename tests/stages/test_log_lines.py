@@ -19,6 +19,8 @@ SCRIPT = textwrap.dedent("""
     F = np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3], [1, 2, 3]])
     warn_repairs(repair_mesh(V, F, "008.obj")[1])
     warnings.warn("a library says\\nsomething", UserWarning)
+    import logging
+    logging.getLogger("distributed.nanny").warning("Worker process still alive after 4.0 seconds, killing")
 """)
 
 
@@ -31,4 +33,5 @@ def test_repairs_and_warnings_are_one_line_log_messages():
     assert any(x.startswith("warning: 008.obj: 1 vertex used by no face is ignored (first: vertex 4)") for x in lines)
     assert lines[-1] == "warning: a library says something (UserWarning)"
     assert all(x.startswith("warning: ") for x in lines) and len(lines) == len(set(lines))
+    assert "Worker process" not in res.stderr            # the libraries underneath: not the user's business
     assert "warn_repairs(" not in res.stderr and ".py:" not in res.stderr   # no source line, no file:line
