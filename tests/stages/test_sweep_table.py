@@ -149,11 +149,11 @@ def test_sweep_cli_prints_headline_table_and_writes_csv(project, tmp_path):
     res = cli(["sweep", "p.yaml", "--grid", "sigma=0.5,1,2", "--workers", "0", "--quiet", "--metrics",
                "count_00*"], cwd=tmp_path, env=env, timeout=300)
     assert res.returncode == 0, res.stderr
+    assert res.stdout.splitlines()[0].split()[:4] == ["sigma", "count_000", "count_001", "count_002"]
     res = cli(["sweep", "p.yaml", "--grid", "sigma=0.5,1,2", "--workers", "0", "--quiet"], cwd=tmp_path,
               env={**env, "COLUMNS": "80"}, timeout=300)
     table = [x for x in res.stdout.splitlines() if not x.startswith("figure: ")]   # (a path: not wrapped)
     assert table and max(len(x) for x in table) <= 80
-    assert res.stdout.splitlines()[0].split()[:4] == ["sigma", "count_000", "count_001", "count_002"]
 
 
 def test_progress_estimates_time_left():
