@@ -3,8 +3,8 @@ overlap, content wider than the window, a screenshot.
 
 ``python -m tests.browser REPORT.html SHOT_FOLDER`` checks the page at every width of :data:`WIDTHS`, saves a
 screenshot per width there (``first_screen_<width>.png``), prints what it found and exits 1 on any problem; the
-report test (tests/stages/test_report_browser.py) uses :func:`check_page`. :func:`browser_problem` says why no browser can
-be had (None when one can), so tests skip with that reason.
+report test (tests/stages/test_report_browser.py) uses :func:`check_page`. :func:`browser_problem` says why no
+browser can be had (None when one can), so tests skip with that reason.
 """
 from __future__ import annotations
 

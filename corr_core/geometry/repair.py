@@ -49,7 +49,8 @@ def _drop_repeated_index(F: np.ndarray, file_ids: np.ndarray, name: str, records
     bad = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
     if bad.any():
         records.append(_record(name, "degenerate_faces", "dropped", bad.sum(), "repair",
-                               f"dropped {counted(bad.sum(), 'face')} that repeat{'s' if bad.sum() == 1 else ''} a vertex (first: face "
+                               f"dropped {counted(bad.sum(), 'face')} that "
+                               f"repeat{'s' if bad.sum() == 1 else ''} a vertex (first: face "
                                f"{int(file_ids[bad][0])})"))
     return ~bad
 
@@ -73,7 +74,8 @@ def _drop_duplicates(F: np.ndarray, file_ids: np.ndarray, name: str, records: li
         dup = np.flatnonzero(~keep)
         opposite = int(np.sum(_orientation_sign(F[dup]) != _orientation_sign(F[first[inverse[dup]]])))
         records.append(_record(name, "duplicate_faces", "dropped", len(dup), "repair",
-                               f"dropped {counted(len(dup), 'duplicate face')} ({len(dup) - opposite} same orientation, "
+                               f"dropped {counted(len(dup), 'duplicate face')} "
+                               f"({len(dup) - opposite} same orientation, "
                                f"{opposite} opposite orientation; first: face {int(file_ids[dup[0]])} repeats "
                                f"face {int(file_ids[first[inverse[dup[0]]]])})"))
     return keep
@@ -169,7 +171,8 @@ def _report_non_manifold(F: np.ndarray, name: str, records: list) -> None:
         first = E[np.flatnonzero(bad)[0]]
         records.append(_record(name, "non_manifold_edges", "kept", bad.sum(), "warning",
                                f"{counted(bad.sum(), 'non-manifold edge')} shared by more than two faces "
-                               f"remain{'s' if bad.sum() == 1 else ''} after removing duplicates (first: ({int(first[0])}, {int(first[1])}))"))
+                               f"remain{'s' if bad.sum() == 1 else ''} after removing duplicates "
+                               f"(first: ({int(first[0])}, {int(first[1])}))"))
 
 
 def _components(V: np.ndarray, F: np.ndarray, keep_largest: bool, name: str, records: list) -> np.ndarray:
@@ -188,7 +191,8 @@ def _components(V: np.ndarray, F: np.ndarray, keep_largest: bool, name: str, rec
     n_used, n_kept = len(np.unique(F)), len(np.unique(F[keep]))
     records.append(_record(name, "components", "dropped", len(present) - 1, "repair",
                            f"kept the largest of {len(present)} components: {n_kept:,} of {n_used:,} vertices; "
-                           f"{counted(n_used - n_kept, 'vertex', 'vertices')} in {counted(len(present) - 1, 'small piece')} ignored "
+                           f"{counted(n_used - n_kept, 'vertex', 'vertices')} in "
+                           f"{counted(len(present) - 1, 'small piece')} ignored "
                            f"({counted((~keep).sum(), 'face')}, {1 - area[best] / area.sum():.2%} of the area; vertex "
                            "ids unchanged)"))
     return F[keep]
@@ -198,7 +202,8 @@ def _report_unreferenced(n_vertices: int, F: np.ndarray, name: str, records: lis
     unused = np.setdiff1d(np.arange(n_vertices), np.unique(F))
     if len(unused):
         records.append(_record(name, "unreferenced_vertices", "ignored", len(unused), "repair",
-                               f"{counted(len(unused), 'vertex', 'vertices')} used by no face {'is' if len(unused) == 1 else 'are'} ignored (first: vertex "
+                               f"{counted(len(unused), 'vertex', 'vertices')} used by no face "
+                               f"{'is' if len(unused) == 1 else 'are'} ignored (first: vertex "
                                f"{int(unused[0])}); they take no part in normalization or rendering"))
 
 
@@ -213,7 +218,8 @@ def _report_boundary(F: np.ndarray, name: str, records: list) -> None:
     n_loops, labels = connected_components(A, directed=False)
     sizes = np.bincount(labels[local[:, 0]], minlength=n_loops)
     records.append(_record(name, "boundary", "kept", n_loops, "note",
-                           f"{counted(len(border), 'boundary edge')} in {counted(n_loops, 'loop')} (open surface or holes, not "
+                           f"{counted(len(border), 'boundary edge')} in {counted(n_loops, 'loop')} "
+                           f"(open surface or holes, not "
                            f"filled; smallest loop {int(sizes.min())} edges, largest {int(sizes.max())})"))
 
 
