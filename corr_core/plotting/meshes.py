@@ -312,10 +312,15 @@ def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, pred
     panel_w, panel_h = 3.0 * aspect, 3.2
     legend_w = (0.35 + 0.075 * LABEL_PT / 9 * max((len(n) for n in names), default=4)) if legend else 0.0
     widths = [panel_w] * n_cols + ([legend_w] if legend else [])
-    fig = plt.figure(figsize=(sum(widths) + 0.4, panel_h * n_rows + 0.9))
-    grid = fig.add_gridspec(n_rows, len(widths), width_ratios=widths, wspace=0.04, hspace=0.12,
+    cameras = "" if n_cols == n_panels else f" ({view_name(views[0], n_views)})"
+    suptitle = fit_title(title + cameras + "\ngreen: right; red x: wrong, a red line to the true landmark (blue "
+                         "ring); faint: hidden from this side", sum(widths) + 0.4, 10)
+    top_in = 0.55 + 0.2 * (suptitle.count("\n") + 1)    # the title's lines, then the panels' two-line titles
+    fig = plt.figure(figsize=(sum(widths) + 0.4, panel_h * n_rows + top_in))
+    grid = fig.add_gridspec(n_rows, len(widths), width_ratios=widths, wspace=0.04,
+                            hspace=0.12 if n_cols == n_panels else 0.18,
                             left=0.4 / (sum(widths) + 0.4), right=0.995, bottom=0.01,
-                            top=1 - 0.95 / (panel_h * n_rows + 0.9))
+                            top=1 - top_in / (panel_h * n_rows + top_in))
     axes = np.array([[fig.add_subplot(grid[i, j]) for j in range(n_cols)] for i in range(n_rows)])
     for ax in axes.ravel():
         ax.axis("off")
@@ -353,12 +358,7 @@ def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, pred
         lax.axis("off")
         lax.text(0.02, 0.5, "\n".join(f"{i + 1:>2} {n}" for i, n in enumerate(names)), fontsize=LABEL_PT,
                  va="center", ha="left", family="monospace", transform=lax.transAxes)
-    cameras = "" if n_cols == n_panels else f" ({view_name(views[0], n_views)})"
-    suptitle = fit_title(title + cameras + "\ngreen: right; red x: wrong, a red line to the true landmark (blue "
-                         "ring); faint: hidden from this side", fig.get_figwidth(), 10)
     fig.suptitle(suptitle, fontsize=10)
-    if suptitle.count("\n") > 1:   # more title lines than planned: make room above the panels
-        grid.update(top=1 - (0.3 + 0.2 * suptitle.count("\n")) / fig.get_figheight())
     fig.savefig(path, dpi=90)
     drawn = _drawn(fig, [(ax, title_of(k)) for k, ax in enumerate(a for a, *_ in labelled)])
     plt.close(fig)
@@ -492,7 +492,7 @@ def plot_landmark_methods(template: tuple, meshes: dict, landmark_vids: np.ndarr
                              {"template": landmark_vids, **{k: landmark_vids for k in worst}},
                              {k: methods[m][pose] for k, (m, pose) in worst.items()}, list(names),
                              "the worst test pose of each method", os.path.join(out_dir, worst_file),
-                             views=views[:1], wrap=3, legend=False)
+                             views=views[:1], wrap=3)
         figures.insert(0, worst_file)
     return figures, shown
 
