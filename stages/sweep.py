@@ -200,7 +200,8 @@ def _cell_text(v) -> str:
 def format_table(rows: list[dict], headline: dict | None = None, width: int | None = None) -> str:
     """A plain-text table: one row per grid point, its point values then the headline metrics, at most
     ``width`` characters wide (default: the terminal's, :func:`terminal_width`), notes wrapped to it too; the best
-    value of each column whose direction is known ends with ``*``.
+    value of each column whose direction is known ends with ``*``. Headers are the metric keys, or group.measure,
+    or (when that is still too wide) the group above the measure on two lines, before columns are left out.
 
     headline: {"columns": [...], "better": {...}} (see :func:`headline_columns`); None: every scalar metric
     (then columns that do not fit are left out, with a note)."""
@@ -218,22 +219,26 @@ def format_table(rows: list[dict], headline: dict | None = None, width: int | No
         columns.append([_cell_text(v) + ("*" if i in best else "") for i, v in enumerate(values)])
     body_point = [[str(r["point"].get(c, "")) for c in cols_point] for r in rows]
 
-    def render(labels: list[str], shown: int) -> list[str]:
+    def render(labels: list[str], shown: int, two_rows: bool = False) -> list[str]:
+        """The table with ``shown`` metric columns; ``two_rows``: each header split at its last dot, the group
+        above the measure (narrower columns)."""
         header = cols_point + labels[:shown]
+        rows = [[h.rpartition(".")[0] for h in header], [h.rpartition(".")[2] for h in header]] if two_rows \
+            else [header]
         body = [bp + [col[i] for col in columns[:shown]] for i, bp in enumerate(body_point)]
-        widths = [max(len(h), *(len(b[i]) for b in body)) if body else len(h) for i, h in enumerate(header)]
+        widths = [max(*(len(r[i]) for r in rows + body), 0) for i in range(len(header))]
         fmt = lambda cells: "  ".join(c.rjust(w) if j >= len(cols_point) else c.ljust(w)  # noqa: E731
                                       for j, (c, w) in enumerate(zip(cells, widths))).rstrip()
-        return [fmt(header), fmt(["-" * w for w in widths])] + [fmt(b) for b in body]
+        return [fmt(r) for r in rows] + [fmt(["-" * w for w in widths])] + [fmt(b) for b in body]
 
     def note(text: str) -> list[str]:
         return textwrap.wrap(text, width, subsequent_indent="  ", break_on_hyphens=False)
 
     short = [_short(c, cols_m) for c in cols_m]
-    label_sets = (cols_m, short) if short != cols_m else (cols_m,)
-    for labels in label_sets:
+    label_sets = [(cols_m, False)] + ([(short, False)] if short != cols_m else []) + [(short, True)]
+    for labels, two_rows in label_sets:
         for shown in range(len(cols_m), 0, -1):
-            lines = render(labels, shown)
+            lines = render(labels, shown, two_rows)
             if max(len(x) for x in lines) <= width:
                 if shown < len(cols_m):
                     lines += note(f"({len(cols_m) - shown} more column(s) do not fit: see --csv or --metrics)")
@@ -242,9 +247,9 @@ def format_table(rows: list[dict], headline: dict | None = None, width: int | No
                 if better:
                     lines.append("* best of the column")
                 return "\n".join(lines)
-            if labels is not label_sets[-1]:
+            if (labels, two_rows) != label_sets[-1]:
                 break   # these labels do not fit: try shorter ones before dropping columns
-    lines = render(short, 1)   # not even one metric column fits: the point values and the first column
+    lines = render(short, 1, True)   # not even one metric column fits: the point values and the first column
     return "\n".join([x[:width] for x in lines] + note("columns: " + cols_m[0] if cols_m else ""))
 
 

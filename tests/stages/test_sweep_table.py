@@ -78,9 +78,12 @@ def test_format_table_fits_the_terminal(columns, monkeypatch):
         assert max(len(x) for x in lines) <= columns
         assert max(len(x) for x in lines) > columns - 30          # it uses the room it has
     lines = format_table(rows, {"columns": keys, "better": {}}).splitlines()
-    header = lines[0].split()
-    assert all("." in h for h in header[1:])                       # never a bare "min" or "exact"
-    assert header[1] == "seed_stability_0.min"
+    dashes = next(i for i, x in enumerate(lines) if set(x.replace(" ", "")) == {"-"})
+    assert dashes == 2                                             # group above measure: more columns fit
+    groups, measures = lines[0].split(), lines[1].split()
+    assert len(groups) == len(measures) >= 4                       # never a bare "min" or "exact"
+    assert (groups[1], measures[1]) == ("seed_stability_0", "min")
+    assert ("azimuth", "exact") in set(zip(groups, measures))
     legend = text[text.index("columns:"):] if (text := "\n".join(lines)) else ""
     assert "correspondence.seed_stability_0.min" in legend.replace("\n  ", " ")   # the full keys, wrapped
 
