@@ -40,7 +40,7 @@ def configure_logging() -> None:
     """The engine's reporter for library messages: every ``logging`` warning or error of the plugins' packages
     (e.g. a mesh repair) and every Python warning printed to stderr as one line
     (``warning: 008.obj: dropped 4,780 duplicate faces ...``) without the source line a Python warning shows.
-    Idempotent; the CLI calls it, and so does every task (on a dask worker too)."""
+    Idempotent; the CLI calls it, and so does every task on a dask worker."""
     root = logging.getLogger()
     if any(isinstance(h.formatter, _OneLine) for h in root.handlers):
         return

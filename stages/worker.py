@@ -145,6 +145,17 @@ def left_out_items(call: TaskCall, upstream: tuple) -> tuple[tuple[str, str, str
     return tuple(sorted(entries))
 
 
+def _in_dask_worker() -> bool:
+    """True inside a dask worker (whose process the engine sets up; in the caller's own process the CLI, or the
+    program calling the API, decides how logging looks)."""
+    try:
+        from distributed import get_worker
+        get_worker()
+        return True
+    except (ImportError, ValueError):
+        return False
+
+
 def run_task(call: TaskCall, *upstream: TaskResult) -> TaskResult:
     """Execute one task; never raises (see :class:`TaskStatus` for the outcomes).
 
@@ -178,7 +189,8 @@ def run_task(call: TaskCall, *upstream: TaskResult) -> TaskResult:
     if "out_dir" in fn.engine_args:
         out_dir = store.tmp_dir()
         kwargs["out_dir"] = out_dir
-    configure_logging()   # what the function logs (e.g. a mesh repair) reaches stderr as one line
+    if _in_dask_worker():   # what the function logs (e.g. a mesh repair) reaches stderr as one line, as in the CLI
+        configure_logging()
     t0 = time.perf_counter()
     try:
         value = _call(fn, call, inputs, kwargs, failed)
