@@ -1,7 +1,7 @@
 """The report in a real browser: headless Chromium opens it at a phone's width and at 1000, 1400 and 1920 px:
 no console error, no broken image, no two content boxes overlapping and nothing wider than the window (wide
-tables scroll inside their own box), the summary (and at most 40 table rows) before the first figure, every
-figure a link to its full-size PNG. A screenshot of the first screen at 1400x900 is saved to
+tables scroll inside their own box), the summary (and at most 40 table rows) before the first figure (that every
+figure links to its full-size file: tests/stages/test_report.py). A screenshot of the first screen at 1400x900 is saved to
 ``$REPORT_SCREENSHOT`` (default ``<temp dir>/report_first_screen.png``, e.g. /tmp/...; the README's
 docs/img/report_first_screen.png is this screenshot of the default pipeline's report, see tests/browser.py), and
 one per width next to it (``report_first_screen_<width>.png``).
