@@ -6,7 +6,7 @@ import json
 import os
 import sys
 
-from .errors import PipelineError, UserError
+from .errors import PipelineError, UserError, configure_logging
 
 MAX_WORKERS = 4 * (os.cpu_count() or 1)
 
@@ -160,6 +160,7 @@ def parse(argv=None) -> argparse.Namespace:
 def main(argv=None) -> int:
     """The ``stages`` console script and ``python -m stages``: returns the exit code."""
     args = parse(argv)
+    configure_logging()
     try:
         return _dispatch(args)
     except PipelineError as exc:
@@ -278,15 +279,20 @@ def _dispatch(args) -> int:
             fn = registry.get(name)
             rows.append({"name": name, "kind": fn.kind, "fanout": fn.fanout, "inputs": list(fn.inputs),
                          "params": {k: repr(p.default) for k, p in fn.params.items()},
-                         "doc": fn.doc.splitlines()[0] if fn.doc else ""})
+                         "doc": first_sentence(fn.doc or "")})
         if args.json:
             print(json.dumps(rows, indent=2))
         else:
+            import shutil
+            import textwrap
+
+            width = max(40, shutil.get_terminal_size((100, 24)).columns)
             for r in rows:
                 params = ", ".join(f"{k}={v}" for k, v in r["params"].items())
-                print(f"{r['name']:<32} {r['fanout']:<5} inputs({', '.join(r['inputs'])}) params({params})")
+                print(textwrap.fill(f"{r['name']:<32} {r['fanout']:<5} inputs({', '.join(r['inputs'])}) "
+                                    f"params({params})", width, subsequent_indent=" " * 8, break_on_hyphens=False))
                 if r["doc"]:
-                    print(f"    {r['doc']}")
+                    print(textwrap.fill(r["doc"], width, initial_indent="    ", subsequent_indent="    "))
         return 0
     return 2
 
@@ -300,6 +306,16 @@ def _gc_groups(res: dict) -> list[str]:
              f"pipeline {who}" for (who, stage), b in sorted(groups.items())]
     lines += [f"  generated dataset {g['name']}  pipeline {', '.join(g['pipelines'])}" for g in res["generated"]]
     return lines
+
+
+def first_sentence(doc: str) -> str:
+    """The first sentence of a docstring's first paragraph, whole (its lines joined), ending with its period."""
+    paragraph = " ".join(doc.strip().split("\n\n")[0].split())
+    for i, ch in enumerate(paragraph):
+        if ch in ".!?" and (i + 1 == len(paragraph) or paragraph[i + 1] == " ") and not paragraph[:i].endswith(
+                ("e.g", "i.e", "etc", "vs")):
+            return paragraph[:i + 1]
+    return paragraph
 
 
 def _print_summary(summary: dict) -> None:

@@ -4,6 +4,9 @@ from __future__ import annotations
 import itertools
 import json
 import os
+import re
+import shutil
+import textwrap
 import time
 
 from .errors import PipelineError
@@ -76,15 +79,45 @@ def sweep(path: str, grids: list[str], overrides=(), workers: int = 2, scheduler
     result = {"pipeline": os.path.abspath(path), "grid": grids, "overrides": list(overrides), "rows": rows,
               "failures": failures, "time": time.time(), "headline": headline_columns(plans[0], rows, metric_keys)}
     record = sweep_path(plans[0], grids, overrides)
+    result["figure_file"] = figure_name(plans[0].pipeline.name, grids, overrides)
     write_checked_json(record, json.loads(json.dumps(result, default=str)))
-    figure = os.path.join(plans[0].pipeline.output_dir, "sweeps", os.path.basename(record)[:-5] + ".png")
+    figure = os.path.join(plans[0].pipeline.output_dir, "sweeps", result["figure_file"])
     result["figure"] = plot_sweep(rows, figure, first=result["headline"]["columns"])
     return result
 
 
+def figure_name(pipeline_name: str, grids: list[str], overrides=()) -> str:
+    """The file name of a sweep's plot: the pipeline and the swept parameters with their values
+    (``shapecorr_align.sigma_scale=0.5,1,2.png``), plus a short hash of the fixed overrides when there are any."""
+    safe = lambda text: re.sub(r"[^A-Za-z0-9._=,+-]+", "_", text).strip("_")  # noqa: E731
+    name = "_".join([safe(pipeline_name) or "pipeline"] + [safe(g.replace(" ", "")) for g in grids])[:150]
+    if overrides:
+        name += "_with-" + digest_json(list(overrides))[:8]
+    return name + ".png"
+
+
+def _echoes_parameter(xs: list[float], values: list[float]) -> bool:
+    """True when a metric only repeats the swept parameter: the same values, or a fixed multiple of them (e.g. a
+    ``sigma`` that is ``sigma_scale`` times a constant)."""
+    if any(x == 0 and v != 0 for x, v in zip(xs, values)):
+        return False
+    pairs = [(x, v) for x, v in zip(xs, values) if x != 0]
+    if len(pairs) < 2:
+        return False
+    ratios = [v / x for x, v in pairs]
+    return max(ratios) - min(ratios) <= 1e-9 * max(abs(r) for r in ratios)
+
+
+def _varies(values: list[float]) -> bool:
+    """More than float noise between the values (relative spread above 1e-9)."""
+    lo, hi = min(values), max(values)
+    return hi - lo > 1e-9 * max(abs(lo), abs(hi), 1e-300)
+
+
 def plot_sweep(rows: list[dict], path: str, max_panels: int = 8, first: list[str] = ()) -> str | None:
-    """Plot the scalar metrics that vary across a one-axis numeric sweep against the swept value
-    (``first``: the keys to plot first, e.g. the headline columns; then energies, accuracies, ...).
+    """Plot the scalar metrics that vary across a one-axis numeric sweep against the swept value, leaving out
+    constants and metrics that only repeat the swept parameter (``first``: the keys to plot first, e.g. the
+    headline columns; then energies, accuracies, ...).
 
     Returns the PNG written, or None when the sweep has several axes, one point, or nothing varies."""
     axes_keys = list(dict.fromkeys(k for r in rows for k in r["point"]))
@@ -98,7 +131,7 @@ def plot_sweep(rows: list[dict], path: str, max_panels: int = 8, first: list[str
     flat = [scalar_metrics(r["metrics"]) for r in rows]
     names = [n for n in dict.fromkeys(k for f in flat for k in f)
              if all(isinstance(f.get(n), (int, float)) and not isinstance(f.get(n), bool) for f in flat)
-             and len({f[n] for f in flat}) > 1]
+             and _varies([f[n] for f in flat]) and not _echoes_parameter(xs, [f[n] for f in flat])]
     preferred = [n for n in first if n in names]
     preferred += [n for n in names if n not in preferred and any(
         w in n for w in ("energy", "accuracy", "exact", "stability", "equivariance"))]
@@ -115,7 +148,7 @@ def plot_sweep(rows: list[dict], path: str, max_panels: int = 8, first: list[str
     for ax, n in zip(axs.ravel(), names):
         ax.plot([xs[i] for i in order], [flat[i][n] for i in order], "o-")
         ax.set_xlabel(key)
-        ax.set_title(n, fontsize=8)
+        ax.set_title("\n".join(textwrap.wrap(n, 34, break_on_hyphens=False)), fontsize=9)
     for ax in axs.ravel()[len(names):]:
         ax.axis("off")
     fig.tight_layout()
@@ -125,7 +158,13 @@ def plot_sweep(rows: list[dict], path: str, max_panels: int = 8, first: list[str
     return path
 
 
-MAX_WIDTH = 120   # characters of the printed sweep table
+MAX_WIDTH = 120   # characters of the printed sweep table when the output is no terminal and COLUMNS is unset
+
+
+def terminal_width(default: int = MAX_WIDTH) -> int:
+    """Characters per line of the terminal (``COLUMNS`` first, then the terminal itself; ``default`` when the
+    output goes to a file or pipe), at least 40."""
+    return max(40, shutil.get_terminal_size((default, 24)).columns)
 
 
 def headline_columns(plan, rows: list[dict], requested: list[str] | None = None) -> dict:
@@ -149,13 +188,13 @@ def headline_columns(plan, rows: list[dict], requested: list[str] | None = None)
     return {"columns": columns, "better": {k: directions[k] for k in columns if directions.get(k)}}
 
 
-def _short(key: str, keys: list[str], min_len: int = 5) -> str:
-    """The last dotted part of a key, or more parts when the last one is not unique among ``keys`` or too short
-    to say what it is (``seed_stability.min``, not ``min``)."""
+def _short(key: str, keys: list[str]) -> str:
+    """The last two dotted parts of a key (group.measure: ``seed_stability.min``, ``accuracy.mrf``, never a bare
+    ``min``), or more when those are not unique among ``keys``."""
     parts = key.split(".")
-    for n in range(1, len(parts) + 1):
+    for n in range(min(2, len(parts)), len(parts) + 1):
         tail = ".".join(parts[-n:])
-        if sum(k == tail or k.endswith("." + tail) for k in keys) == 1 and (len(tail) >= min_len or n == len(parts)):
+        if sum(k == tail or k.endswith("." + tail) for k in keys) == 1:
             return tail
     return key
 
@@ -164,12 +203,15 @@ def _cell_text(v) -> str:
     return f"{v:.4g}" if isinstance(v, float) else ("" if v is None else str(v))
 
 
-def format_table(rows: list[dict], headline: dict | None = None, width: int = MAX_WIDTH) -> str:
+def format_table(rows: list[dict], headline: dict | None = None, width: int | None = None) -> str:
     """A plain-text table: one row per grid point, its point values then the headline metrics, at most
-    ``width`` characters wide; the best value of each column whose direction is known ends with ``*``.
+    ``width`` characters wide (default: the terminal's, :func:`terminal_width`), notes wrapped to it too; the best
+    value of each column whose direction is known ends with ``*``. Headers are the metric keys, or group.measure,
+    or (when that is still too wide) the group above the measure on two lines, before columns are left out.
 
     headline: {"columns": [...], "better": {...}} (see :func:`headline_columns`); None: every scalar metric
     (then columns that do not fit are left out, with a note)."""
+    width = width or terminal_width()
     cols_point = list(dict.fromkeys(k for r in rows for k in r["point"]))
     flat = [scalar_metrics(r["metrics"]) for r in rows]
     cols_m = list((headline or {}).get("columns") or dict.fromkeys(k for f in flat for k in f))
@@ -183,29 +225,38 @@ def format_table(rows: list[dict], headline: dict | None = None, width: int = MA
         columns.append([_cell_text(v) + ("*" if i in best else "") for i, v in enumerate(values)])
     body_point = [[str(r["point"].get(c, "")) for c in cols_point] for r in rows]
 
-    def render(labels: list[str], shown: int) -> list[str]:
+    def render(labels: list[str], shown: int, two_rows: bool = False) -> list[str]:
+        """The table with ``shown`` metric columns; ``two_rows``: each header split at its last dot, the group
+        above the measure (narrower columns)."""
         header = cols_point + labels[:shown]
+        rows = [[h.rpartition(".")[0] for h in header], [h.rpartition(".")[2] for h in header]] if two_rows \
+            else [header]
         body = [bp + [col[i] for col in columns[:shown]] for i, bp in enumerate(body_point)]
-        widths = [max(len(h), *(len(b[i]) for b in body)) if body else len(h) for i, h in enumerate(header)]
+        widths = [max(*(len(r[i]) for r in rows + body), 0) for i in range(len(header))]
         fmt = lambda cells: "  ".join(c.rjust(w) if j >= len(cols_point) else c.ljust(w)  # noqa: E731
                                       for j, (c, w) in enumerate(zip(cells, widths))).rstrip()
-        return [fmt(header), fmt(["-" * w for w in widths])] + [fmt(b) for b in body]
+        return [fmt(r) for r in rows] + [fmt(["-" * w for w in widths])] + [fmt(b) for b in body]
 
-    label_sets = (cols_m, [_short(c, cols_m) for c in cols_m], [_short(c, cols_m, 1) for c in cols_m])
-    for labels in label_sets:
+    def note(text: str) -> list[str]:
+        return textwrap.wrap(text, width, subsequent_indent="  ", break_on_hyphens=False)
+
+    short = [_short(c, cols_m) for c in cols_m]
+    label_sets = [(cols_m, False)] + ([(short, False)] if short != cols_m else []) + [(short, True)]
+    for labels, two_rows in label_sets:
         for shown in range(len(cols_m), 0, -1):
-            lines = render(labels, shown)
+            lines = render(labels, shown, two_rows)
             if max(len(x) for x in lines) <= width:
                 if shown < len(cols_m):
-                    lines.append(f"({len(cols_m) - shown} more column(s) do not fit: see --csv or --metrics)")
+                    lines += note(f"({len(cols_m) - shown} more column(s) do not fit: see --csv or --metrics)")
                 if labels is not cols_m:
-                    lines.append("columns: " + ", ".join(cols_m[:shown]))
+                    lines += note("columns: " + ", ".join(cols_m[:shown]))
                 if better:
                     lines.append("* best of the column")
                 return "\n".join(lines)
-            if labels is not label_sets[-1]:
+            if (labels, two_rows) != label_sets[-1]:
                 break   # these labels do not fit: try shorter ones before dropping columns
-    return "\n".join(render([_short(c, cols_m) for c in cols_m], 1))
+    lines = render(short, 1, True)   # not even one metric column fits: the point values and the first column
+    return "\n".join([x[:width] for x in lines] + note("columns: " + cols_m[0] if cols_m else ""))
 
 
 def write_table(rows: list[dict], path: str) -> str:

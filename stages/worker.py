@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from . import audit, registry
-from .errors import CorruptEntry
+from .errors import CorruptEntry, configure_logging
 from .inputs import (DictInput, InputError, InputSpec, PairsInput, SparsePairsInput, StackInput, ValueInput,
                      partial_pairs, partial_tile)
 from .store import Store
@@ -146,6 +146,17 @@ def left_out_items(call: TaskCall, upstream: tuple) -> tuple[tuple[str, str, str
     return tuple(sorted(entries))
 
 
+def _in_dask_worker() -> bool:
+    """True inside a dask worker (whose process the engine sets up; in the caller's own process the CLI, or the
+    program calling the API, decides how logging looks)."""
+    try:
+        from distributed import get_worker
+        get_worker()
+        return True
+    except (ImportError, ValueError):
+        return False
+
+
 def run_task(call: TaskCall, *upstream: TaskResult) -> TaskResult:
     """Execute one task; never raises (see :class:`TaskStatus` for the outcomes).
 
@@ -179,6 +190,8 @@ def run_task(call: TaskCall, *upstream: TaskResult) -> TaskResult:
     if "out_dir" in fn.engine_args:
         out_dir = store.tmp_dir()
         kwargs["out_dir"] = out_dir
+    if _in_dask_worker():   # what the function logs (e.g. a mesh repair) reaches stderr as one line, as in the CLI
+        configure_logging()
     t0 = time.perf_counter()
     try:
         if audit.enabled():  # tests and plugin checks: every project function that runs must be in the key

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import subprocess
 import sys
@@ -181,3 +182,17 @@ def run_quiet(path, **kw):
     from stages import api
 
     return api.run(str(path), workers=0, quiet=True, **kw)
+
+
+@contextlib.contextmanager
+def logged(name: str = "corr_core.geometry.repair"):
+    """The messages the ``name`` logger emits inside the block (warnings and above)."""
+    messages: list[str] = []
+    handler = logging.Handler(logging.WARNING)
+    handler.emit = lambda record: messages.append(record.getMessage())
+    logger = logging.getLogger(name)
+    logger.addHandler(handler)
+    try:
+        yield messages
+    finally:
+        logger.removeHandler(handler)

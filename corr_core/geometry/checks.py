@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from corr_core.geometry.mesh_io import MeshError, check_mesh
+from corr_core.geometry.mesh_io import MeshError, check_mesh, counted
 from corr_core.geometry.primitives import face_areas, unique_edges, vertex_components
 
 
@@ -52,11 +52,11 @@ def check_correspondence_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh",
                      f"first: ({int(bad[0])}, {int(bad[1])}); kept (results near them may be less accurate)")
     n_boundary = int(np.sum(count == 1))
     if n_boundary:
-        warns.append(f"{name}: {n_boundary} boundary edge(s) (open surface; Laplacian uses Neumann boundary)")
+        warns.append(f"{name}: {counted(n_boundary, 'boundary edge')} (open surface; Laplacian uses Neumann boundary)")
 
     unused = np.setdiff1d(np.arange(len(V)), np.unique(F))
     if len(unused):
-        msg = f"{name}: {len(unused)} vertex/vertices used by no face (e.g. {int(unused[0])})"
+        msg = f"{name}: {counted(len(unused), 'vertex', 'vertices')} used by no face (e.g. {int(unused[0])})"
         if not allow_unreferenced:
             raise MeshError(msg + "; the geodesic and flattening methods need every vertex on the surface: "
                             "remove the unused vertices (or the stray pieces) from the file")

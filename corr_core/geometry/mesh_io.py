@@ -31,6 +31,12 @@ class MeshError(ValueError):
     """A mesh file that cannot be used; the message names the file, the problem and the fix."""
 
 
+def counted(n, singular: str, plural: str | None = None) -> str:
+    """``n`` with the noun in the right number, for messages: ``1 face``, ``4,780 duplicate faces``, ``2 vertices``."""
+    n = int(n)
+    return f"{n:,} {singular if n == 1 else (plural or singular + 's')}"
+
+
 def load_mesh(path: str | os.PathLike, require_faces: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Read a triangle mesh, vertices in file order.
 
@@ -84,7 +90,8 @@ def check_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", require_faces: 
     used = np.unique(F) if len(F) else np.arange(len(V))
     bad = used[~np.isfinite(V[used]).all(axis=1)]
     if len(bad):
-        raise MeshError(f"{name}: {len(bad)} vertex/vertices used by a face have a NaN or infinite coordinate "
+        raise MeshError(f"{name}: {counted(len(bad), 'vertex', 'vertices')} used by a face "
+                        f"{'has' if len(bad) == 1 else 'have'} a NaN or infinite coordinate "
                         f"(first: vertex {int(bad[0])}); repair the file or remove the mesh")
 
 

@@ -9,7 +9,7 @@ matches vertex i" and landmark vertex ids survive. Vertices that no face uses af
 Every finding is a record (a plain, JSON-ready dict)::
 
     {"file": name, "kind": "duplicate_faces", "action": "dropped", "count": 2, "level": "repair",
-     "message": "scan.obj: dropped 2 duplicate face(s) ..."}
+     "message": "scan.obj: dropped 2 duplicate faces ..."}
 
 ``level`` is "repair" (the faces were changed or vertices are ignored), "warning" (a defect that remains and
 may matter, e.g. non-manifold edges) or "note" (informational: boundary loops, components kept).
@@ -18,15 +18,17 @@ What cannot be made usable raises ``MeshError`` with the reason and the fix.
 from __future__ import annotations
 
 import functools
+import logging
 import os
-import warnings
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-from corr_core.geometry.mesh_io import MeshError, check_mesh, load_mesh
+from corr_core.geometry.mesh_io import MeshError, check_mesh, counted, load_mesh
 from corr_core.geometry.primitives import edge_keys, face_areas, half_edges, unique_edges, vertex_components
+
+log = logging.getLogger(__name__)
 
 __all__ = ["repair_mesh", "load_repaired_mesh", "orient_faces", "warn_repairs", "repair_messages", "compact_mesh"]
 
@@ -47,7 +49,8 @@ def _drop_repeated_index(F: np.ndarray, file_ids: np.ndarray, name: str, records
     bad = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
     if bad.any():
         records.append(_record(name, "degenerate_faces", "dropped", bad.sum(), "repair",
-                               f"dropped {int(bad.sum())} face(s) that repeat a vertex (first: face "
+                               f"dropped {counted(bad.sum(), 'face')} that "
+                               f"repeat{'s' if bad.sum() == 1 else ''} a vertex (first: face "
                                f"{int(file_ids[bad][0])})"))
     return ~bad
 
@@ -71,7 +74,8 @@ def _drop_duplicates(F: np.ndarray, file_ids: np.ndarray, name: str, records: li
         dup = np.flatnonzero(~keep)
         opposite = int(np.sum(_orientation_sign(F[dup]) != _orientation_sign(F[first[inverse[dup]]])))
         records.append(_record(name, "duplicate_faces", "dropped", len(dup), "repair",
-                               f"dropped {len(dup)} duplicate face(s) ({len(dup) - opposite} same orientation, "
+                               f"dropped {counted(len(dup), 'duplicate face')} "
+                               f"({len(dup) - opposite} same orientation, "
                                f"{opposite} opposite orientation; first: face {int(file_ids[dup[0]])} repeats "
                                f"face {int(file_ids[first[inverse[dup[0]]]])})"))
     return keep
@@ -84,7 +88,7 @@ def _drop_zero_area(V: np.ndarray, F: np.ndarray, file_ids: np.ndarray, name: st
     bad = face_areas(V, F) <= tiny
     if bad.any():
         records.append(_record(name, "zero_area_faces", "dropped", bad.sum(), "repair",
-                               f"dropped {int(bad.sum())} zero-area face(s) (area <= {area_tol:g} x bbox "
+                               f"dropped {counted(bad.sum(), 'zero-area face')} (area <= {area_tol:g} x bbox "
                                f"diagonal^2; first: face {int(file_ids[bad][0])})"))
     return ~bad
 
@@ -152,10 +156,10 @@ def _orient(F: np.ndarray, name: str, records: list) -> np.ndarray:
     F, n_flipped, n_inconsistent = orient_faces(F)
     if n_flipped:
         records.append(_record(name, "reoriented_faces", "flipped", n_flipped, "repair",
-                               f"flipped {n_flipped} face(s) to a consistent orientation"))
+                               f"flipped {counted(n_flipped, 'face')} to a consistent orientation"))
     if n_inconsistent:
         records.append(_record(name, "non_orientable_edges", "kept", n_inconsistent, "warning",
-                               f"{n_inconsistent} edge(s) cannot be oriented consistently (non-orientable "
+                               f"{counted(n_inconsistent, 'edge')} cannot be oriented consistently (non-orientable "
                                "surface); orientation-dependent results may be unreliable"))
     return F
 
@@ -166,8 +170,9 @@ def _report_non_manifold(F: np.ndarray, name: str, records: list) -> None:
     if bad.any():
         first = E[np.flatnonzero(bad)[0]]
         records.append(_record(name, "non_manifold_edges", "kept", bad.sum(), "warning",
-                               f"{int(bad.sum())} non-manifold edge(s) shared by more than two faces remain after "
-                               f"removing duplicates (first: ({int(first[0])}, {int(first[1])}))"))
+                               f"{counted(bad.sum(), 'non-manifold edge')} shared by more than two faces "
+                               f"remain{'s' if bad.sum() == 1 else ''} after removing duplicates "
+                               f"(first: ({int(first[0])}, {int(first[1])}))"))
 
 
 def _components(V: np.ndarray, F: np.ndarray, keep_largest: bool, name: str, records: list) -> np.ndarray:
@@ -186,8 +191,9 @@ def _components(V: np.ndarray, F: np.ndarray, keep_largest: bool, name: str, rec
     n_used, n_kept = len(np.unique(F)), len(np.unique(F[keep]))
     records.append(_record(name, "components", "dropped", len(present) - 1, "repair",
                            f"kept the largest of {len(present)} components: {n_kept:,} of {n_used:,} vertices; "
-                           f"{n_used - n_kept:,} vertices in {len(present) - 1} small piece(s) ignored "
-                           f"({int((~keep).sum()):,} face(s), {1 - area[best] / area.sum():.2%} of the area; vertex "
+                           f"{counted(n_used - n_kept, 'vertex', 'vertices')} in "
+                           f"{counted(len(present) - 1, 'small piece')} ignored "
+                           f"({counted((~keep).sum(), 'face')}, {1 - area[best] / area.sum():.2%} of the area; vertex "
                            "ids unchanged)"))
     return F[keep]
 
@@ -196,7 +202,8 @@ def _report_unreferenced(n_vertices: int, F: np.ndarray, name: str, records: lis
     unused = np.setdiff1d(np.arange(n_vertices), np.unique(F))
     if len(unused):
         records.append(_record(name, "unreferenced_vertices", "ignored", len(unused), "repair",
-                               f"{len(unused)} vertex/vertices used by no face are ignored (first: vertex "
+                               f"{counted(len(unused), 'vertex', 'vertices')} used by no face "
+                               f"{'is' if len(unused) == 1 else 'are'} ignored (first: vertex "
                                f"{int(unused[0])}); they take no part in normalization or rendering"))
 
 
@@ -211,7 +218,8 @@ def _report_boundary(F: np.ndarray, name: str, records: list) -> None:
     n_loops, labels = connected_components(A, directed=False)
     sizes = np.bincount(labels[local[:, 0]], minlength=n_loops)
     records.append(_record(name, "boundary", "kept", n_loops, "note",
-                           f"{len(border)} boundary edge(s) in {n_loops} loop(s) (open surface or holes, not "
+                           f"{counted(len(border), 'boundary edge')} in {counted(n_loops, 'loop')} "
+                           f"(open surface or holes, not "
                            f"filled; smallest loop {int(sizes.min())} edges, largest {int(sizes.max())})"))
 
 
@@ -275,9 +283,10 @@ def repair_messages(records: list[dict], levels: tuple = ("repair", "warning")) 
 
 
 def warn_repairs(records: list[dict], levels: tuple = ("repair", "warning")) -> None:
-    """One ``UserWarning`` per repair / remaining defect (each message names the file)."""
+    """One log message (``logging`` warning of this module's logger) per repair / remaining defect, one line each
+    naming the file (``008.obj: dropped 4,780 duplicate faces ...``)."""
     for message in repair_messages(records, levels):
-        warnings.warn(message, UserWarning, stacklevel=2)
+        log.warning(message)
 
 
 def compact_mesh(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

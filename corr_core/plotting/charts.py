@@ -112,7 +112,7 @@ def plot_contact_sheet(views: dict, names: list[str], labels: np.ndarray, path, 
         ax.axis("off")
     for ax, n, l in zip(axes.ravel(), names, labels):
         ax.imshow(views[n][aligned_view_index(int(l), len(views[n]))], cmap="gray", vmin=0, vmax=255)
-        ax.set_title(n, fontsize=6)
+        ax.set_title(n, fontsize=9)
     _save(fig, path, 80)
 
 

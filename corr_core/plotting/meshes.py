@@ -173,66 +173,215 @@ def _show(ax, image: np.ndarray, box: tuple[slice, slice]) -> None:
         s.set_visible(False)
 
 
+LABEL_PT = 9.0                     # landmark numbers and legend, in points
+RIGHT, WRONG, TRUE_EDGE = "#22aa33", "#dd2222", "#1f5fbf"
+
+
+def fit_title(text: str, width_in: float, fontsize: float) -> str:
+    """``text`` wrapped onto lines that fit a figure ``width_in`` inches wide at ``fontsize`` points (about 0.62 em
+    per character), each existing line on its own, so a long title is never cut at the figure's edges."""
+    import textwrap
+
+    chars = max(20, int(width_in * 72 / (0.62 * fontsize)))
+    return "\n".join(part for line in text.split("\n") for part in textwrap.wrap(line, chars) or [""])
+
+
+def view_name(view: int, n_views: int = 8) -> str:
+    """How a figure names camera ``view`` of ``n_views`` (azimuth view * 360 / n_views degrees; 0: the front)."""
+    az = view * 360.0 / n_views
+    return "front view" if view == 0 else f"view turned {az:g}\N{DEGREE SIGN}"
+
+
+def place_labels(points: np.ndarray, sizes: np.ndarray, bounds: tuple[float, float, float, float],
+                 dot: float, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where to put one text label per point so that labels cover neither each other nor the points (greedy, in
+    the order given; all in display pixels, y up).
+
+    Args:
+        points: (k,2) anchor positions; sizes: (k,2) label width and height; bounds: (x0, y0, x1, y1) the area
+            labels should stay in; dot: the radius kept free around every point; step: the distance between
+            candidate rings around a point.
+    Returns (centres (k,2) of the labels, leader (k,) bool: the label sits away from its point, so a line
+        should join them).
+    """
+    points, sizes = np.asarray(points, float), np.asarray(sizes, float)
+    dirs = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1], [1, 0], [-1, 0], [0, 1], [0, -1],
+                     [2, 1], [-2, 1], [2, -1], [-2, -1]], float)
+    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+    placed: list[tuple[float, float, float, float]] = []
+    centres, leader = np.zeros_like(points), np.zeros(len(points), bool)
+
+    def cost(box) -> float:
+        x0, y0, x1, y1 = box
+        c = 0.0
+        for a in placed:
+            c += 10.0 * max(0.0, min(x1, a[2]) - max(x0, a[0])) * max(0.0, min(y1, a[3]) - max(y0, a[1]))
+        near = points[(points[:, 0] > x0 - dot) & (points[:, 0] < x1 + dot) & (points[:, 1] > y0 - dot)
+                      & (points[:, 1] < y1 + dot)]
+        c += 0.5 * dot * dot * len(near)
+        out = max(0.0, bounds[0] - x0) + max(0.0, x1 - bounds[2]) + max(0.0, bounds[1] - y0) + max(0.0, y1 - bounds[3])
+        return c + 50.0 * out * (y1 - y0)
+
+    for i, (p, (w, h)) in enumerate(zip(points, sizes)):
+        best = None
+        for ring in range(10):
+            for d in dirs:
+                # the box's edge (not its centre) at distance dot + ring * step from the point, along d
+                reach = dot + ring * step + 0.5 * abs(d[0]) * w + 0.5 * abs(d[1]) * h
+                c = p + d * reach
+                box = (c[0] - w / 2, c[1] - h / 2, c[0] + w / 2, c[1] + h / 2)
+                score = cost(box) + 1e-3 * ring
+                if best is None or score < best[0]:
+                    best = (score, c, box, ring)
+            if best[0] < 1e-2:
+                break
+        _, centres[i], box, ring = best
+        leader[i] = ring > 0
+        placed.append(box)
+    return centres, leader
+
+
+def _label_points(fig, ax, xy: np.ndarray, texts: list[str], colours: list[str], alphas: np.ndarray,
+                  others: np.ndarray) -> None:
+    """Label the points ``xy`` (k,2, data = image pixels) of an axes with ``texts`` at ``LABEL_PT``, placed by
+    :func:`place_labels` (away from each other and from ``others`` (n,2), the other marks in the picture) with a
+    thin leader line when a label had to move away from its point."""
+    if not len(xy):
+        return
+    renderer = fig.canvas.get_renderer()
+    to_px = ax.transData.transform
+    sizes = []
+    for t in texts:
+        probe = ax.text(0, 0, t, fontsize=LABEL_PT, fontweight="bold")
+        bb = probe.get_window_extent(renderer)
+        sizes.append((bb.width + 3, bb.height + 3))   # a little air around each label
+        probe.remove()
+    pts = to_px(np.asarray(xy, float))
+    box = ax.get_window_extent(renderer)
+    px_per_pt = fig.dpi / 72.0
+    everything = np.concatenate([pts, to_px(np.asarray(others, float).reshape(-1, 2))]) if len(others) else pts
+    centres, leader = place_labels(everything, np.array(sizes + [(0.0, 0.0)] * (len(everything) - len(pts))),
+                                   (box.x0, box.y0, box.x1, box.y1), dot=4.5 * px_per_pt, step=5 * px_per_pt)
+    for i, t in enumerate(texts):
+        offset = (centres[i] - pts[i]) / px_per_pt
+        ax.annotate(t, xy[i], xytext=tuple(offset), textcoords="offset points", ha="center", va="center",
+                    fontsize=LABEL_PT, fontweight="bold", color=colours[i], alpha=alphas[i], gid="landmark-label",
+                    annotation_clip=False,
+                    arrowprops=dict(arrowstyle="-", lw=0.7, color="#444", alpha=alphas[i], shrinkA=0, shrinkB=2)
+                    if leader[i] else None)
+
+
 def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, predictions: dict,
                          names: list[str], title: str, path, views: tuple[int, ...] = (0, 1), n_views: int = 8,
-                         size: int = 300, wrap: int | None = None, legend: bool = True) -> None:
+                         size: int = 300, wrap: int | None = None, legend: bool = True) -> dict:
     """The template and some test poses side by side with the landmarks as numbered dots.
 
     Args:
         template: (V, F) of the template; poses: {pose name: (V, F)} in display order (e.g. best .. worst).
         landmark_vids: {"template": (L,) vertex ids, pose name: (L,) vertex ids} (the landmark files).
         predictions: {pose name: (L,) predicted landmark index per template landmark}; truth i -> i, so
-            ``pred[i] != i`` is drawn as a red dot with a cross (green dot: right).
+            ``pred[i] != i`` is drawn as a red dot with a cross, joined by a red line to the true landmark i
+            (a blue ring); green dot: right.
         names: (L,) landmark names (numbered in the legend); title: the figure title.
-        views: the cameras shown (rows).
+        views: the cameras shown (rows, each named on the left).
         wrap: with one view, at most this many panels per row (the panels wrap onto more rows).
-        legend: list the numbered landmark names on the right.
-    Writes one PNG to ``path``.
+        legend: list the numbered landmark names next to the panels.
+    Writes one PNG to ``path``. Numbers are ``LABEL_PT`` points, moved apart (with a leader line) where they
+    would overlap. Returns what was drawn (:func:`_drawn`: the lines from wrong placements, the labels), for checks.
     """
     plt = pyplot()
     axis = up_axis(template[0])
-    panels = []   # (name, row, image, xy, visible, right)
+    panels = []   # (name, row, view, image, xy, visible, right, xy_true, visible_true)
     for name, (V, F) in [("template", template)] + list(poses.items()):
         Vn = normalise_for_picture(stand_up(V, axis))
         L = len(landmark_vids[name])
         pred = np.arange(L) if name == "template" else np.asarray(predictions[name], np.int64)
-        vids = np.asarray(landmark_vids[name], np.int64)[pred]
+        own = np.asarray(landmark_vids[name], np.int64)
         for r, view in enumerate(views):
             image = render_colored(Vn, F, np.tile(GREY, (len(Vn), 1)), view, n_views, size)
-            xy, visible = project_vertices(Vn, F, vids, view, n_views, size)
-            panels.append((name, r, image, xy, visible, pred == np.arange(L)))
-    box = crop_box([p[2] for p in panels])
+            xy, visible = project_vertices(Vn, F, own[pred], view, n_views, size)
+            xy_true, visible_true = project_vertices(Vn, F, own, view, n_views, size)
+            panels.append((name, r, view, image, xy, visible, pred == np.arange(L), xy_true, visible_true))
+    box = crop_box([p[3] for p in panels])
     n_panels = len(poses) + 1
     n_cols = min(wrap, n_panels) if wrap and len(views) == 1 else n_panels
     n_rows = len(views) if n_cols == n_panels else -(-n_panels // n_cols)
     place = (lambda k, r: (r, k // len(views))) if n_cols == n_panels else (lambda k, r: divmod(k, n_cols))
     aspect = (box[1].stop - box[1].start) / (box[0].stop - box[0].start) if box[0].start is not None else 1.0
     aspect = max(aspect, 0.8)   # room for the titles
-    extra = 1.8 if legend else 0.2
-    fig, axes = plt.subplots(n_rows, n_cols, figsize=(2.7 * aspect * n_cols + extra, 2.9 * n_rows), squeeze=False)
+    panel_w, panel_h = 3.0 * aspect, 3.2
+    legend_w = (0.35 + 0.075 * LABEL_PT / 9 * max((len(n) for n in names), default=4)) if legend else 0.0
+    widths = [panel_w] * n_cols + ([legend_w] if legend else [])
+    cameras = "" if n_cols == n_panels else f" ({view_name(views[0], n_views)})"
+    suptitle = fit_title(title + cameras + "\ngreen: right; red x: wrong, a red line to the true landmark (blue "
+                         "ring); faint: hidden from this side", sum(widths) + 0.4, 10)
+    top_in = 0.55 + 0.2 * (suptitle.count("\n") + 1)    # the title's lines, then the panels' two-line titles
+    fig = plt.figure(figsize=(sum(widths) + 0.4, panel_h * n_rows + top_in))
+    grid = fig.add_gridspec(n_rows, len(widths), width_ratios=widths, wspace=0.04,
+                            hspace=0.12 if n_cols == n_panels else 0.18,
+                            left=0.4 / (sum(widths) + 0.4), right=0.995, bottom=0.01,
+                            top=1 - top_in / (panel_h * n_rows + top_in))
+    axes = np.array([[fig.add_subplot(grid[i, j]) for j in range(n_cols)] for i in range(n_rows)])
     for ax in axes.ravel():
         ax.axis("off")
-    for k, (name, r, image, xy, visible, right) in enumerate(panels):
+    labelled = []
+    title_of = lambda k: f"{panels[k][0]}, {view_name(panels[k][2], n_views)}"  # noqa: E731
+    for k, (name, r, view, image, xy, visible, right, xy_true, visible_true) in enumerate(panels):
         ax = axes[place(k, r)]
         ax.axis("on")
         _show(ax, image, box)
+        alpha = np.where(visible, 1.0, 0.45)
+        for i in np.nonzero(~right)[0]:     # each wrong placement: a line to where the landmark really is
+            a = 1.0 if visible[i] or visible_true[i] else 0.45
+            ax.plot([xy[i, 0], xy_true[i, 0]], [xy[i, 1], xy_true[i, 1]], "-", color=WRONG, lw=1.3, alpha=a,
+                    gid="wrong-to-true", zorder=3)
+            ax.plot(*xy_true[i], "o", ms=6, mfc="none", mec=TRUE_EDGE, mew=1.4, alpha=a, gid="true-landmark",
+                    zorder=4)
         for i in range(len(right)):
-            alpha = 1.0 if visible[i] else 0.4
-            ax.plot(*xy[i], "o", ms=5, mfc="#22aa33" if right[i] else "#dd2222", mec="k", mew=0.5, alpha=alpha)
+            ax.plot(*xy[i], "o", ms=5.5, mfc=RIGHT if right[i] else WRONG, mec="k", mew=0.5, alpha=alpha[i],
+                    zorder=5)
             if not right[i]:
-                ax.plot(*xy[i], "x", ms=9, color="#dd2222", mew=1.4, alpha=alpha)
-            ax.annotate(str(i + 1), xy[i], xytext=(3, 2), textcoords="offset points", fontsize=6, alpha=alpha)
+                ax.plot(*xy[i], "x", ms=9, color=WRONG, mew=1.4, alpha=alpha[i], zorder=5)
         if r == 0 or n_cols != n_panels:
             wrong = int((~right).sum())
             ax.set_title(name if name == "template" else f"{name}\n{len(right) - wrong}/{len(right)} right",
-                         fontsize=8, color="k" if wrong == 0 else "#aa0000")
+                         fontsize=9, color="k" if wrong == 0 else "#aa0000")
+        if place(k, r)[1] == 0 and n_cols == n_panels:
+            ax.set_ylabel(view_name(view, n_views), fontsize=9)
+        labelled.append((ax, xy, right, alpha, xy_true[~right]))
+    fig.canvas.draw()   # the axes take their final (equal-aspect) boxes: labels are placed in final pixels
+    for ax, xy, right, alpha, others in labelled:
+        _label_points(fig, ax, xy, [str(i + 1) for i in range(len(right))],
+                      ["#111" if ok else "#aa0000" for ok in right], alpha, others)
     if legend:
-        fig.text(0.995, 0.5, "\n".join(f"{i + 1:>2} {n}" for i, n in enumerate(names)), fontsize=6.5,
-                 va="center", ha="right", family="monospace")
-    fig.suptitle(title + "\ngreen: right, red x: wrong; faint: hidden from this side", fontsize=9)
-    fig.tight_layout(rect=(0, 0, 1 - (extra - 0.1) / fig.get_figwidth(), 0.93))
+        lax = fig.add_subplot(grid[:, -1])
+        lax.axis("off")
+        lax.text(0.02, 0.5, "\n".join(f"{i + 1:>2} {n}" for i, n in enumerate(names)), fontsize=LABEL_PT,
+                 va="center", ha="left", family="monospace", transform=lax.transAxes)
+    fig.suptitle(suptitle, fontsize=10)
     fig.savefig(path, dpi=90)
+    drawn = _drawn(fig, [(ax, title_of(k)) for k, ax in enumerate(a for a, *_ in labelled)])
     plt.close(fig)
+    return drawn
+
+
+def _drawn(fig, axes: list) -> dict:
+    """What a saved landmark figure shows, read back from its artists: {"wrong_lines": [(panel, (x0, y0, x1, y1))
+    in image pixels], "labels": [(panel, text, font size pt, (x0, y0, x1, y1) display pixels)]}."""
+    from matplotlib.text import Text
+
+    renderer = fig.canvas.get_renderer()
+    out = {"wrong_lines": [], "labels": []}
+    for ax, panel in axes:
+        for line in ax.lines:
+            if line.get_gid() == "wrong-to-true":
+                (x0, x1), (y0, y1) = line.get_xdata(), line.get_ydata()
+                out["wrong_lines"].append((panel, (float(x0), float(y0), float(x1), float(y1))))
+        for t in ax.texts:
+            if t.get_gid() == "landmark-label":
+                bb = Text.get_window_extent(t, renderer)     # the text's own box (not its leader line)
+                out["labels"].append((panel, t.get_text(), float(t.get_fontsize()), (bb.x0, bb.y0, bb.x1, bb.y1)))
+    return out
 
 
 def plot_dense_panels(template: tuple, poses: dict, vertex_maps: dict, captions: dict, title: str, path,
@@ -257,15 +406,19 @@ def plot_dense_panels(template: tuple, poses: dict, vertex_maps: dict, captions:
     box = crop_box([p[2] for p in panels])
     aspect = (box[1].stop - box[1].start) / (box[0].stop - box[0].start) if box[0].start is not None else 1.0
     aspect = max(aspect, 0.8)   # room for the titles
-    fig, axes = plt.subplots(len(views), len(columns), figsize=(2.7 * aspect * len(columns) + 0.4,
-                                                                2.9 * len(views)), squeeze=False)
+    width = 2.7 * aspect * len(columns) + 0.6
+    suptitle = fit_title(title, width, 10)
+    top = 0.25 + 0.2 * (suptitle.count("\n") + 1)      # inches above the panels for the title
+    fig, axes = plt.subplots(len(views), len(columns), figsize=(width, 2.9 * len(views) + top), squeeze=False)
     for k, (name, r, image) in enumerate(panels):
         ax = axes[r, k // len(views)]
         _show(ax, image, box)
         if r == 0:
-            ax.set_title(name + (f"\n{captions[name]}" if name in captions else ""), fontsize=8)
-    fig.suptitle(title, fontsize=9)
-    fig.tight_layout(rect=(0, 0, 1, 0.93))
+            ax.set_title(name + (f"\n{captions[name]}" if name in captions else ""), fontsize=9)
+        if k < len(views):
+            ax.set_ylabel(view_name(views[r], n_views), fontsize=9)
+    fig.suptitle(suptitle, fontsize=10)
+    fig.tight_layout(rect=(0, 0, 1, 1 - top / fig.get_figheight()))
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     fig.savefig(path, dpi=90)
     plt.close(fig)
@@ -339,7 +492,7 @@ def plot_landmark_methods(template: tuple, meshes: dict, landmark_vids: np.ndarr
                              {"template": landmark_vids, **{k: landmark_vids for k in worst}},
                              {k: methods[m][pose] for k, (m, pose) in worst.items()}, list(names),
                              "the worst test pose of each method", os.path.join(out_dir, worst_file),
-                             views=views[:1], wrap=3, legend=False)
+                             views=views[:1], wrap=3)
         figures.insert(0, worst_file)
     return figures, shown
 

@@ -48,7 +48,8 @@ class ReportContext:
 
     def sweep_figure(self, sw: dict) -> str | None:
         """The published plot of a recorded sweep (relative to the output folder), if there is one."""
-        rel = "sweeps/" + os.path.basename(sw.get("_file", ""))[:-5] + ".png"
+        name = sw.get("figure_file") or os.path.basename(sw.get("_file", ""))[:-5] + ".png"   # older records
+        rel = "sweeps/" + name
         return rel if rel in self.images else None
 
     @property

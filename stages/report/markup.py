@@ -17,35 +17,40 @@ MAX_INLINE_ENTRIES = 12      # dicts/lists longer than this are folded into a <d
 MAX_ROWS_SHOWN = 2000        # rows of a folded table actually written
 
 CSS = """
-body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:0 auto;max-width:1360px;padding:.4em 1.5em;
-color:#222;line-height:1.35}
+*{box-sizing:border-box}
+body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:0 auto;max-width:1880px;padding:.4em 1.5em;
+color:#222;line-height:1.35;overflow-wrap:break-word}
 h1{font-size:1.35em;margin:.2em 0;border-bottom:2px solid #446;padding-bottom:.15em}
 h2{border-bottom:1px solid #aab;margin-top:2em}#summary h2{display:none}
 h3{margin-top:1.5em}code,pre{font-family:Menlo,Consolas,monospace;font-size:.9em}
 pre{background:#f5f5f8;padding:.6em;overflow-x:auto;max-height:30em}
-table{border-collapse:collapse;margin:.5em 0 1em 0;font-size:.92em}
+.tscroll{max-width:100%;overflow-x:auto;margin:.5em 0 1em 0}
+table{border-collapse:collapse;font-size:.92em}
 th,td{border:1px solid #ccd;padding:.2em .6em;text-align:left;vertical-align:top}
-th{background:#eef}td.num{text-align:right;font-variant-numeric:tabular-nums}
+th{background:#eef}td.num{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
 tr:nth-child(even) td{background:#fafafd}
 .note{background:#fff8e0;border-left:4px solid #e0b000;padding:.5em 1em;margin:1em 0}
 .bad{color:#b00}.muted{color:#777}#summary .note{padding:.25em .8em;margin:.35em 0;font-size:.88em}
 #summary p.bad{margin:.3em 0;font-size:.9em}
 .figs{display:flex;flex-wrap:wrap;gap:1em;align-items:flex-start}
-figure{margin:0;border:1px solid #dde;padding:.5em;max-width:100%;background:#fff}
-figure img{max-width:100%;max-height:720px;display:block}
-figcaption{font-size:.9em;margin-top:.3em}figcaption pre{max-height:12em;margin:.3em 0 0 0}
+figure{margin:0;border:1px solid #dde;padding:.5em;max-width:100%;min-width:0;background:#fff}
+figure img{max-width:100%;max-height:720px;height:auto;display:block}
+figure a.full{display:block;cursor:zoom-in}
+figcaption{font-size:.9em;margin-top:.3em;overflow-wrap:anywhere}figcaption pre{max-height:12em;margin:.3em 0 0 0}
 details{margin:.3em 0 1em 0}summary{cursor:pointer;color:#335}
 nav{font-size:.9em;margin:.2em 0}nav h2{display:none}nav ul{display:inline;padding:0;margin:0}
-nav li{display:inline;margin-right:1.1em}
+nav li{display:inline-block;margin-right:1.1em}
 .runline{font-size:.88em;margin:.3em 0 .5em 0;color:#333}.small{font-size:.8em;margin:.2em 0}
-.problem{display:flex;gap:1em;align-items:flex-start;border-top:1px solid #dde;padding:.4em 0}
-.ptable{flex:0 0 auto;max-width:44%}.ptable h3{margin:.1em 0 .3em 0;font-size:1em}
-.pfigs{display:flex;gap:.6em;flex:1 1 auto;justify-content:flex-start;min-width:0}
-figure.thumb{padding:.2em;flex:0 1 auto;min-width:0}figure.thumb img{max-height:290px;max-width:100%}
-figure.thumb figcaption{font-size:.75em;margin-top:.1em;overflow-wrap:anywhere}
+.problem{display:flex;flex-wrap:wrap;gap:.6em 1.2em;align-items:flex-start;border-top:1px solid #dde;padding:.4em 0}
+.ptable{flex:0 1 auto;min-width:0;max-width:100%}.ptable h3{margin:.1em 0 .3em 0;font-size:1em}
+.ptable .tscroll{margin:.2em 0}
+.pfigs{display:flex;flex-wrap:wrap;gap:.6em;flex:1 1 auto;justify-content:flex-start;min-width:0;max-width:100%}
+figure.thumb{padding:.2em;flex:0 1 auto;min-width:0}figure.thumb img{max-height:720px;max-width:100%}
+figure.thumb figcaption{font-size:.8em;margin-top:.1em}
 figure.pointer{border-style:dashed;color:#555}
-table.summary-table{font-size:.86em;margin:.2em 0}table.summary-table td,table.summary-table th{padding:.12em .45em}
+table.summary-table{font-size:.86em;margin:0}table.summary-table td,table.summary-table th{padding:.12em .45em}
 td.best{font-weight:bold;color:#064;background:#e6f5ea !important}
+@media (max-width:700px){body{padding:.3em .6em}.pfigs{flex-basis:100%}figure{padding:.25em}}
 """
 
 
@@ -84,7 +89,12 @@ def table(header: list[str], rows: Iterable[list[Any]], cls: str = "", raw_cols:
         cells = "".join(f"<td>{c}</td>" if i in raw_cols else _cell(c) for i, c in enumerate(r))
         body.append(f"<tr>{cells}</tr>")
     attr = f' class="{cls}"' if cls else ""
-    return f"<table{attr}><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+    return scroll_box(f"<table{attr}><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>")
+
+
+def scroll_box(inner: str) -> str:
+    """``inner`` (a table) in its own box that scrolls sideways when it is wider than the page."""
+    return f'<div class="tscroll">{inner}</div>'
 
 
 def folded(summary: str, inner: str, open_: bool = False) -> str:

@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 import os
+from urllib.parse import quote
 
 from ..results import scalar_metrics
 from .context import ReportContext, caption_file
 from .headline import HeadlineTable, best_indices
-from .markup import anchor, data_uri, esc, folded, format_value, human_size, is_scalar, render_value, table, when
+from .markup import (anchor, data_uri, esc, folded, format_value, human_size, is_scalar, render_value, scroll_box,
+                     table, when)
 
 
 def _run_line(ctx: ReportContext) -> str:
@@ -63,7 +65,8 @@ def headline_table_html(t: HeadlineTable) -> str:
             else:
                 cells.append(f'<td class="num">{esc(_short_number(v))}</td>')
         body.append(f"<tr>{''.join(cells)}</tr>")
-    return f'<table class="summary-table"><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table>'
+    return scroll_box(f'<table class="summary-table"><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody>'
+                      "</table>")
 
 
 def _headline_block(ctx: ReportContext, t: HeadlineTable) -> str:
@@ -123,17 +126,31 @@ def summary_section(ctx: ReportContext) -> str:
     return "".join(parts)
 
 
+def figure_link(ctx: ReportContext, rel: str) -> str:
+    """The URL of a published figure relative to the report file (a plain link that opens it full size)."""
+    target = os.path.join(ctx.output_dir, rel)
+    try:
+        href = os.path.relpath(target, os.path.dirname(os.path.abspath(ctx.out_path)))
+    except ValueError:   # another drive (Windows)
+        href = os.path.abspath(target)
+    return "/".join(quote(part, safe="=,+") for part in href.replace(os.sep, "/").split("/"))
+
+
 def figure_html(ctx: ReportContext, rel: str, thumb: bool = False) -> str:
-    """One embedded figure with its caption file (if any) and its path; ``thumb``: the summary's small form."""
-    caption = f"<code>{esc(rel)}</code>"
+    """One embedded figure, a link to the full-size file, with its caption file (if any) and its path;
+    ``thumb``: the summary's smaller form."""
+    folder, _, file = rel.rpartition("/")
+    caption = f'<span class="muted">in <code>{esc(folder)}/</code></span>' if folder else ""
     cap_rel = caption_file(rel)
     if cap_rel in ctx.caption_files:
         with open(os.path.join(ctx.output_dir, cap_rel), encoding="utf-8", errors="replace") as fh:
             caption += f"<pre>{esc(fh.read().strip())}</pre>"
-    title = os.path.splitext(rel.split("/", 1)[-1])[0].replace("_", " ")   # path inside the stage folder
+    title = os.path.splitext(file)[0]     # the file's own name (e.g. dense_dense_auto: method dense_auto)
     cls = ' class="thumb"' if thumb else ""
-    return (f'<figure{cls}><img src="{data_uri(os.path.join(ctx.output_dir, rel))}" alt="{esc(title)}" '
-            f'title="{esc(rel)}"><figcaption><b>{esc(title)}</b> {caption}</figcaption></figure>')
+    return (f'<figure{cls}><a class="full" href="{esc(figure_link(ctx, rel))}" target="_blank" '
+            f'title="open {esc(rel)} full size"><img src="{data_uri(os.path.join(ctx.output_dir, rel))}" '
+            f'alt="{esc(title)}" title="{esc(rel)}"></a><figcaption><b>{esc(title)}</b> {caption}</figcaption>'
+            "</figure>")
 
 
 def _figure_or_pointer(ctx: ReportContext, rel: str, placed: dict[str, str]) -> str:

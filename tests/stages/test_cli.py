@@ -188,3 +188,26 @@ def test_version_and_the_stages_console_script(tmp_path):
     assert res.returncode == 0, res.stderr
     assert "summary: 1 task (no earlier run of this pipeline)" in res.stderr and "rep" not in res.stdout
     assert callable(main)
+
+
+@pytest.mark.parametrize("columns", [80, 100])
+def test_functions_fits_the_terminal_with_whole_first_sentences(tmp_path, columns):
+    """``functions`` wraps to COLUMNS and shows each docstring's whole first sentence (not its first line)."""
+    from stages.cli import first_sentence
+
+    assert first_sentence("Per method: the template\n    and 4 poses (e.g. the best). More.\n\nArgs: x") == \
+        "Per method: the template and 4 poses (e.g. the best)."
+    res = cli(["functions"], cwd=tmp_path, env={"COLUMNS": str(columns)})
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    assert lines and max(len(x) for x in lines) <= columns
+    assert max(len(x) for x in lines) > columns - 15                 # wrapped at the width, not far below it
+    docs, current = [], None
+    for line in lines:                                               # a description: the indented lines after a name
+        if line.startswith("    ") and not line.startswith("     "):   # (a name's wrapped params: 8 spaces)
+            current = (current + " " if current else "") + line.strip()
+        elif not line.startswith(" "):
+            if current:
+                docs.append(current)
+            current = None
+    assert docs and all(d.endswith((".", ":", ")", "}", "]")) for d in docs), [d for d in docs if d[-1] not in ".:)}]"]

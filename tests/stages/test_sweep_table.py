@@ -1,4 +1,5 @@
-"""``sweep``'s printed table: headline measures only, at most 120 columns, the best per column starred;
+"""``sweep``'s printed table: headline measures only, as wide as the terminal (COLUMNS) at most, headers
+group.measure, notes wrapped, the best per column starred;
 ``--metrics`` picks columns (keys or patterns), ``--csv`` writes the full table; plus the progress estimate."""
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import pytest
 
 from stages.errors import PipelineError
 from stages.execute import Progress
-from stages.sweep import MAX_WIDTH, format_table, headline_columns, write_table
+from stages.sweep import MAX_WIDTH, figure_name, format_table, headline_columns, plot_sweep, write_table
 from tests.helpers import SYNTHETIC_YAML, cli, loaded_plugin, make_project, plugins_env
 
 PLUGIN = "sweep_table_plugin"
@@ -56,9 +57,49 @@ def test_format_table_fits_and_marks_the_best():
     assert [r[3] for r in body] == ["0.1*", "0.3", "0.2"]           # min
     assert [r[2] for r in body] == ["0.5", "0.5", "0.5"]            # no direction: no mark
     # every scalar metric (152 columns) does not fit: shortened, cut, and said so
-    text = format_table(rows, None)
+    text = format_table(rows, None, width=MAX_WIDTH)
     assert max(len(x) for x in text.splitlines()) <= MAX_WIDTH
     assert "more column(s) do not fit" in text
+
+
+@pytest.mark.parametrize("columns", [80, 100])
+def test_format_table_fits_the_terminal(columns, monkeypatch):
+    """COLUMNS sets the width: the table, its wrapped column legend and notes fit; headers say group.measure."""
+    monkeypatch.setenv("COLUMNS", str(columns))
+    keys = [f"correspondence.seed_stability_{k}.min" for k in range(3)] + ["alignment.azimuth.exact",
+                                                                          "dense.mobius.mean_error"]
+    rows = [{"point": {"align.sigma_scale": str(i)},
+             "metrics": {"correspondence": {f"seed_stability_{k}": {"min": 123456.789 + i + k} for k in range(3)},
+                         "alignment": {"azimuth": {"exact": 0.5}}, "dense": {"mobius": {"mean_error": 0.25}},
+                         **{f"count_{j:03d}": j for j in range(150)}}}
+            for i in range(3)]
+    for head in ({"columns": keys, "better": {}}, None):
+        lines = format_table(rows, head).splitlines()
+        assert max(len(x) for x in lines) <= columns
+        assert max(len(x) for x in lines) > columns - 30          # it uses the room it has
+    lines = format_table(rows, {"columns": keys, "better": {}}).splitlines()
+    dashes = next(i for i, x in enumerate(lines) if set(x.replace(" ", "")) == {"-"})
+    assert dashes == 2                                             # group above measure: more columns fit
+    groups, measures = lines[0].split(), lines[1].split()
+    assert len(groups) == len(measures) >= 4                       # never a bare "min" or "exact"
+    assert (groups[1], measures[1]) == ("seed_stability_0", "min")
+    assert ("azimuth", "exact") in set(zip(groups, measures))
+    legend = text[text.index("columns:"):] if (text := "\n".join(lines)) else ""
+    assert "correspondence.seed_stability_0.min" in legend.replace("\n  ", " ")   # the full keys, wrapped
+
+
+def test_sweep_plot_leaves_out_trivial_panels_and_is_named_after_the_parameters(tmp_path):
+    """A metric that repeats the swept value (times a constant) and a constant are not plotted."""
+    rows = [{"point": {"align.sigma_scale": x}, "metrics": {"sigma": 0.04 * float(x), "energy": 7.0,
+                                                            "noise": 1.0 + 1e-14 * i, "accuracy": [0.5, 0.7, 0.6][i]}}
+            for i, x in enumerate(["0.5", "1", "2"])]
+    path = str(tmp_path / "sweeps" / figure_name("demo pipe", ["align.sigma_scale=0.5,1,2"]))
+    assert path.endswith("sweeps/demo_pipe_align.sigma_scale=0.5,1,2.png")
+    assert plot_sweep(rows, path) == path
+    import matplotlib.image
+    assert matplotlib.image.imread(path).shape[1] <= 3.4 * 100 + 1  # one panel (accuracy), not three
+    only_trivial = [{"point": r["point"], "metrics": {"sigma": r["metrics"]["sigma"], "energy": 7.0}} for r in rows]
+    assert plot_sweep(only_trivial, str(tmp_path / "none.png")) is None
 
 
 def test_write_table_csv_and_json(tmp_path):
@@ -94,11 +135,12 @@ def test_headline_columns_default_requested_and_unknown(project):
 def test_sweep_cli_prints_headline_table_and_writes_csv(project, tmp_path):
     env = plugins_env(PLUGIN)
     env["PYTHONPATH"] += ":" + str(tmp_path)
+    env["COLUMNS"] = "0"     # unset: the output is a pipe, so the default width
     res = cli(["sweep", "p.yaml", "--grid", "sigma=0.5,1,2", "--workers", "0", "--quiet", "--csv", "full.csv"],
               cwd=tmp_path, env=env, timeout=300)
     assert res.returncode == 0, res.stderr
     lines = res.stdout.splitlines()
-    assert max(len(x) for x in lines) <= MAX_WIDTH
+    assert max(len(x) for x in lines) <= MAX_WIDTH      # no terminal, COLUMNS unset: the default width
     assert lines[0].split() == ["sigma", "score.m1", "error.m1", "score.m2", "error.m2"]
     body = [line.split() for line in lines[2:5]]
     assert [r[0] for r in body] == ["0.5", "1", "2"]
@@ -111,6 +153,10 @@ def test_sweep_cli_prints_headline_table_and_writes_csv(project, tmp_path):
                "count_00*"], cwd=tmp_path, env=env, timeout=300)
     assert res.returncode == 0, res.stderr
     assert res.stdout.splitlines()[0].split()[:4] == ["sigma", "count_000", "count_001", "count_002"]
+    res = cli(["sweep", "p.yaml", "--grid", "sigma=0.5,1,2", "--workers", "0", "--quiet"], cwd=tmp_path,
+              env={**env, "COLUMNS": "80"}, timeout=300)
+    table = [x for x in res.stdout.splitlines() if not x.startswith("figure: ")]   # (a path: not wrapped)
+    assert table and max(len(x) for x in table) <= 80
 
 
 def test_progress_estimates_time_left():

@@ -65,7 +65,7 @@ def test_same_connectivity():
 def test_unreferenced_vertices_error_when_not_allowed():
     V = np.vstack([TET_V, [[1e30, 0, 0]]])
     assert any("used by no face" in w for w in check_correspondence_mesh(V, TET_F, "stray"))
-    with pytest.raises(MeshError, match="stray: 1 vertex/vertices used by no face.*remove"):
+    with pytest.raises(MeshError, match="stray: 1 vertex used by no face.*remove"):
         check_correspondence_mesh(V, TET_F, "stray", allow_unreferenced=False)
 
 

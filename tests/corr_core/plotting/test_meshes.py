@@ -107,3 +107,66 @@ def test_pull_back_colors_leaves_out_template_vertices_without_an_image():
     assert np.allclose(out[5], colors[keep][np.argmin(np.linalg.norm(V[keep] - V[5], axis=1))])
     with pytest.raises(ValueError, match="at least one image"):
         pm.pull_back_colors(colors, np.full(20, -1), V)
+
+
+def sphere_mesh(n_lat: int = 24, n_lon: int = 48):
+    """A UV sphere of radius 1 (poles at +-y), outward triangles."""
+    V = [[0.0, 1.0, 0.0]]
+    for i in range(1, n_lat):
+        t = np.pi * i / n_lat
+        V += [[np.sin(t) * np.sin(p), np.cos(t), np.sin(t) * np.cos(p)]
+              for p in np.linspace(0, 2 * np.pi, n_lon, endpoint=False)]
+    V.append([0.0, -1.0, 0.0])
+    ring = lambda i, j: 1 + (i - 1) * n_lon + j % n_lon  # noqa: E731
+    F = [[0, ring(1, j), ring(1, j + 1)] for j in range(n_lon)]
+    for i in range(1, n_lat - 1):
+        for j in range(n_lon):
+            F += [[ring(i, j), ring(i + 1, j), ring(i + 1, j + 1)], [ring(i, j), ring(i + 1, j + 1), ring(i, j + 1)]]
+    F += [[len(V) - 1, ring(n_lat - 1, j + 1), ring(n_lat - 1, j)] for j in range(n_lon)]
+    return np.array(V), np.array(F)
+
+
+def test_landmark_figure_one_known_mistake(tmp_path):
+    """A run with one known mistake (landmark 3 placed on landmark 6): exactly one red line per view, from where
+    landmark 3 was put to where it is; labels >= 9 pt, none covering another (a cluster of 8 landmarks close
+    together on the front), the views named, the legend written."""
+    V, F = sphere_mesh()
+    front = np.nonzero((V[:, 2] > 0.85))[0][:8]                 # 8 landmarks crowded around the front pole
+    assert len(front) == 8
+    pred = np.arange(8)
+    pred[2] = 5
+    out = tmp_path / "landmarks.png"
+    drawn = pm.plot_landmark_panels((V, F), {"pose": (V, F)}, {"template": front, "pose": front}, {"pose": pred},
+                                    [f"landmark_{i}" for i in range(8)], "one mistake", out, views=(0, 1))
+    assert out.stat().st_size > 1000
+    lines = drawn["wrong_lines"]
+    assert [panel for panel, _ in lines] == ["pose, front view", "pose, view turned 45\N{DEGREE SIGN}"]
+    for view, (_, (x0, y0, x1, y1)) in zip((0, 1), lines):
+        Vn = pm.normalise_for_picture(pm.stand_up(V, pm.up_axis(V)))
+        xy, _ = pm.project_vertices(Vn, F, front[[5, 2]], view, 8, 300)
+        assert np.allclose([x0, y0], xy[0]) and np.allclose([x1, y1], xy[1])   # placed -> true
+    labels = drawn["labels"]
+    assert len(labels) == 4 * 8 and min(size for _, _, size, _ in labels) >= 9
+    for panel in {p for p, *_ in labels}:
+        boxes = [b for p, _, _, b in labels if p == panel]
+        for i in range(len(boxes)):
+            for j in range(i + 1, len(boxes)):
+                a, b = boxes[i], boxes[j]
+                overlap = min(a[2], b[2]) - max(a[0], b[0]), min(a[3], b[3]) - max(a[1], b[1])
+                assert min(overlap) <= 0.5, f"{panel}: labels {i + 1} and {j + 1} overlap"
+
+
+@pytest.mark.parametrize("width", [2.5, 4.0, 9.0])
+def test_long_titles_are_wrapped_inside_the_figure(width):
+    """A one-pose dense figure is narrow: its long title is wrapped, not cut at the figure's edges."""
+    from corr_core.plotting.charts import pyplot
+
+    plt = pyplot()
+    fig = plt.figure(figsize=(width, 3))
+    title = ("dense_auto: template coordinates as RGB, pulled back through the dense map (best .. worst pose)"
+             "\ngreen: right; red x: wrong, a red line to the true landmark (blue ring); faint: hidden from this side")
+    text = fig.suptitle(pm.fit_title(title, width, 10), fontsize=10)
+    fig.canvas.draw()
+    box, page = text.get_window_extent(), fig.bbox
+    plt.close(fig)
+    assert box.x0 >= page.x0 and box.x1 <= page.x1
