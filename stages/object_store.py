@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from .errors import CorruptEntry, UserError, warn_once
-from .store import (CACHE_MARKER, FORMAT_VERSION, KEY_PATTERN, _CACHE_NAMES, _READ_CACHE, Store, _chunks_for,
+from .store import (CACHE_MARKER, FORMAT_VERSION, KEY_PATTERN, _CACHE_NAMES, _READ_CACHE, _TOO_DEEP, Store, _chunks_for,
                     _copy_arrays, _decode, _encode, _fill_value, _json_default, _manifest_problem, array_checksum,
                     claim_folder, file_checksum, manifest_checksum, read_checked_arrays)
 
@@ -205,6 +205,8 @@ class ObjectStore(Store):
             doc, problem = None, "is not UTF-8 text (overwritten or damaged)"
         except ValueError:
             doc, problem = None, "is not valid JSON (truncated or edited)"
+        except RecursionError:
+            doc, problem = None, _TOO_DEEP
         if problem is None and not (isinstance(doc.get("location"), str) and KEY_PATTERN.match(doc["location"])):
             problem = "names no data location (not written for an object store)"
         if problem is not None:

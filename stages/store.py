@@ -100,6 +100,11 @@ def _read_json_bytes(path: str) -> tuple[Any, str | None]:
         return None, "is not UTF-8 text (overwritten or damaged)"
     except ValueError:
         return None, "is not valid JSON (truncated or edited)"
+    except RecursionError:  # e.g. '[' * 200000: damaged, like a truncated file (never a traceback)
+        return None, _TOO_DEEP
+
+
+_TOO_DEEP = "is nested too deeply to be read (damaged or not written by the engine)"
 
 
 def write_checked_json(path: str, obj: Any) -> None:
@@ -119,12 +124,15 @@ def read_checked_json(path: str, what: str, default: Any = None, kind: type | No
     if doc is _ABSENT:
         return default
     if problem is None:
-        if not isinstance(doc, dict) or set(doc) != {"checksum", "data"}:
-            problem = "was not written by this version of the engine"
-        elif digest_json(doc["data"]) != doc["checksum"]:
-            problem = "does not match its checksum (edited or damaged)"
-        elif kind is not None and not isinstance(doc["data"], kind):
-            problem = f"does not hold a {kind.__name__}"
+        try:
+            if not isinstance(doc, dict) or set(doc) != {"checksum", "data"}:
+                problem = "was not written by this version of the engine"
+            elif digest_json(doc["data"]) != doc["checksum"]:
+                problem = "does not match its checksum (edited or damaged)"
+            elif kind is not None and not isinstance(doc["data"], kind):
+                problem = f"does not hold a {kind.__name__}"
+        except RecursionError:  # parsed, but too deep to hash
+            problem = _TOO_DEEP
     if problem is not None:
         if warn:
             warn_once(f"{path} {problem}; {what}")
@@ -582,6 +590,13 @@ def manifest_checksum(doc: dict) -> str:
 
 def _manifest_problem(doc: Any, key: str) -> str | None:
     """Why a parsed manifest cannot be trusted (None when it can)."""
+    try:
+        return _manifest_problem_of(doc, key)
+    except RecursionError:  # parsed, but too deep to hash
+        return _TOO_DEEP
+
+
+def _manifest_problem_of(doc: Any, key: str) -> str | None:
     if not isinstance(doc, dict) or any(f not in doc for f in _MANIFEST_FIELDS + ("checksum",)):
         return "is incomplete"
     if doc["format"] != FORMAT_VERSION:
