@@ -151,7 +151,7 @@ class ObjectStore(Store):
         try:
             if self.is_marked():
                 return
-            foreign = [n for n in self._top_names() if not n.startswith(_CACHE_NAMES) and not n.startswith(".")]
+            foreign = [n for n in self._top_names() if n not in _CACHE_NAMES and not n.startswith(".")]
         except UserError:
             raise
         except OSError as exc:

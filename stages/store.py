@@ -266,6 +266,40 @@ def cache_location(location: str) -> str:
     return location.rstrip("/") if is_url(location) else os.path.abspath(location)
 
 
+_TMP_SUFFIX = r"(\.[0-9a-f]{32}\.tmp)?"   # a half-written file of atomic_write_text
+# the files the engine writes in a cache (relative paths, '/'-separated); tmp/ holds none that may be adopted
+_ENGINE_FILE = re.compile("^(?:" + "|".join([
+    r"manifest/[0-9a-f]{2}/[0-9a-f]{32}\.json" + _TMP_SUFFIX,
+    r"objects/[0-9a-f]{2}/[0-9a-f]{32}\.(?:zarr|files)/.+",
+    r"runs/[^/]+-[0-9a-f]{10}\.json" + _TMP_SUFFIX,
+    r"sweeps/[^/]+-[0-9a-f]{10}-[0-9a-f]{8}\.json" + _TMP_SUFFIX,
+    r"generated/[0-9a-f]{32}/.+",
+    r"(?:filehash|fingerprints)\.json" + _TMP_SUFFIX]) + ")$")
+
+
+def _foreign_content(root: str) -> list[str]:
+    """What in the unmarked folder ``root`` the engine did not write (relative paths, at most 5): a top-level
+    name that is not exactly one of the engine's, a file at a path the engine never writes, any file under
+    ``tmp/`` (its folders are cleaned wholesale, so only an empty one is adopted), any symbolic link.
+    Hidden top-level files (.DS_Store, .nfs*) do not count."""
+    foreign = sorted(n for n in os.listdir(root) if n not in _CACHE_NAMES and not n.startswith("."))
+    for top in sorted(n for n in os.listdir(root) if n in _CACHE_NAMES and n != CACHE_MARKER):
+        path = os.path.join(root, top)
+        if os.path.islink(path):
+            foreign.append(top)
+            continue
+        walk = os.walk(path) if os.path.isdir(path) else [(root, [], [top])]
+        for dirpath, dirnames, filenames in walk:
+            for n in dirnames + filenames:
+                full = os.path.join(dirpath, n)
+                rel = os.path.relpath(full, root).replace(os.sep, "/")
+                if os.path.islink(full) or (n in filenames and not _ENGINE_FILE.match(rel)):
+                    foreign.append(rel)
+            if len(foreign) >= 5:
+                return foreign[:5]
+    return foreign[:5]
+
+
 def claim_folder(root: str) -> None:
     """Create the local cache folder ``root`` with its marker, or adopt a folder that holds only what the engine
     writes; leave a read-only folder as it is (see :meth:`Store.claim`).
@@ -279,14 +313,13 @@ def claim_folder(root: str) -> None:
         raise UserError(f"the cache {root} is not a folder", fix="choose a folder for --cache / 'cache:'")
     if os.path.isdir(root):
         try:
-            foreign = sorted(n for n in os.listdir(root)  # hidden files (.DS_Store, .nfs*) do not count
-                             if not n.startswith(_CACHE_NAMES) and not n.startswith("."))
+            foreign = _foreign_content(root)
         except OSError as exc:
             raise UserError(f"cannot read the cache folder {root}: {exc.strerror}") from None
         if foreign:
             shown = ", ".join(foreign[:4]) + (" ..." if len(foreign) > 4 else "")
-            raise UserError(f"the cache folder {root} is not a stages cache (it holds {shown} and no "
-                            f"{CACHE_MARKER} marker): the engine does not write or clean there",
+            raise UserError(f"the cache folder {root} is not a stages cache (it holds {shown}, which the engine "
+                            f"did not write, and no {CACHE_MARKER} marker): the engine does not write or clean there",
                             fix="choose a new or empty folder for --cache / 'cache:' (e.g. ./cache)")
     try:
         os.makedirs(root, exist_ok=True)
