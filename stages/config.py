@@ -93,6 +93,7 @@ class Pipeline:
 
 
 ALIAS_BUDGET = 10_000  # YAML nodes that aliases may add in total once expanded
+MAX_EXPANDED = 1_000_000  # characters and values one ${...} reference (or a string holding some) may expand to
 
 
 class YAMLRefused(yaml.MarkedYAMLError):
@@ -351,8 +352,33 @@ class _Resolver:
     def __init__(self, params: dict, pipe: Pipeline, err):
         self.params, self.pipe, self.err = params, pipe, err
         self.generated_used: set[str] = set()
+        self._done: dict[str, Any] = {}       # ref -> its resolved value (each parameter is resolved once)
+        self._sizes: dict[int, tuple[int, Any]] = {}  # id(list or dict built here) -> (size, the object)
+
+    def _size(self, value: Any) -> int:
+        """Characters of the strings plus number of values in ``value`` once written out (linear: the size of
+        every list and dict built here is remembered, so shared references are not walked again)."""
+        if isinstance(value, str):
+            return len(value)
+        if isinstance(value, (dict, list)):
+            hit = self._sizes.get(id(value))
+            if hit is not None and hit[1] is value:
+                return hit[0]
+            n = 1 + sum(self._size(v) for v in (value.values() if isinstance(value, dict) else value))
+            self._sizes[id(value)] = (n, value)
+            return n
+        return 1
+
+    def _bounded(self, value: Any, what: str, where: tuple) -> Any:
+        if self._size(value) > MAX_EXPANDED:
+            raise self.err(f"{what} expands to more than {MAX_EXPANDED:,} characters and values (references "
+                           "that repeat references, nested too deep?)", *where,
+                           fix="write the value out, or reference it fewer times")
+        return value
 
     def lookup(self, ref: str, where: tuple, seen: tuple = ()) -> Any:
+        if ref in self._done:
+            return self._done[ref]
         if ref in seen:
             raise self.err(f"parameter reference cycle: {' -> '.join(seen + (ref,))}", *where)
         parts = ref.split(".")
@@ -368,7 +394,9 @@ class _Resolver:
                 raise self.err(f"unknown parameter reference '${{{ref}}}'", *where,
                                fix=_suggest(p, node if isinstance(node, dict) else []))
             node = node[p]
-        return self.resolve(node, where, seen + (ref,))
+        value = self._bounded(self.resolve(node, where, seen + (ref,)), f"'${{{ref}}}'", where)
+        self._done[ref] = value
+        return value
 
     def resolve(self, value: Any, where: tuple, seen: tuple = ()) -> Any:
         if isinstance(value, dict):
@@ -399,8 +427,10 @@ class _Resolver:
                 head = got
             else:
                 text.append(str(got))
+            if sum(map(len, text)) > MAX_EXPANDED:
+                break   # reported below
         text.append(value[pos:])
-        rest = "".join(text)
+        rest = self._bounded("".join(text), f"'{value[:60]}'", where)
         return head.joined(rest) if head is not None else rest
 
 

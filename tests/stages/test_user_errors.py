@@ -50,6 +50,36 @@ def test_a_billion_laughs_file_fails_fast(tmp_path):
     _fails(cli(["status", str(p)], tmp_path, timeout=60), 2, "aliases expand to more than")
 
 
+def _reference_bomb(levels: int, as_list: bool) -> str:
+    """``l{i}`` made of 10 references to ``l{i-1}``: 10**levels copies once expanded (a string, or nested lists)."""
+    lines = ["params:", '  l0: "abcdefghij"']
+    for i in range(1, levels + 1):
+        refs = ["${l%d}" % (i - 1)] * 10
+        lines.append(f"  l{i}: " + (json.dumps(refs) if as_list else '"' + "".join(refs) + '"'))
+    return "\n".join(lines + [
+        "stages: {s: {function: synthetic.summarize, inputs: {distances: d}, params: {sigma: 1}},",
+        "         d: {function: synthetic.pair_distances, pairs: items}}",
+        "datasets: {items: {files: 'data/*.txt', optional: true}}", ""])
+
+
+@pytest.mark.parametrize("as_list", [False, True], ids=["string", "list"])
+def test_a_reference_bomb_fails_fast_naming_the_key(tmp_path, as_list):
+    """11 levels of ten ${...} references each (10**11 copies): an error naming the parameter that grows too
+    large, within seconds (it used to hang), like the alias bomb."""
+    p = tmp_path / "bomb.yaml"
+    p.write_text(_reference_bomb(11, as_list))
+    _fails(cli(["status", str(p)], tmp_path, timeout=60), 2, "expands to more than", "bomb.yaml:")  # first: a hang
+    with pytest.raises(PipelineError, match="expands to more than") as err:                      # times out
+        load_pipeline(str(p))
+    assert err.value.key.startswith("params.l") and err.value.line
+
+
+def test_references_used_many_times_still_resolve(tmp_path):
+    p = tmp_path / "ok.yaml"
+    p.write_text(_reference_bomb(3, as_list=False))
+    assert load_pipeline(str(p)).params["l3"] == "abcdefghij" * 1000
+
+
 def test_a_recursive_alias_is_refused(tmp_path):
     p = tmp_path / "rec.yaml"
     p.write_text("a: &a [*a]\nstages: {s: {function: synthetic.summarize}}\n")
