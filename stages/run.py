@@ -11,9 +11,8 @@ import json
 import os
 import sys
 import time
-import warnings
 
-from .errors import CorruptEntry, UserError
+from .errors import CorruptEntry, UserError, warn_once
 from .execute import clean_tmp, execute_rounds
 from .generated import write_generated
 from .plan import Plan, build_plan, plan_pipeline
@@ -110,8 +109,7 @@ def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None,
             if not corrupt:
                 break
             for key, error in corrupt:
-                warnings.warn(f"{error}; recomputing it", stacklevel=1)
-                log(f"warning: {error}; recomputing it")
+                warn_once(f"{error}; recomputing it")  # once, through the engine's reporter (not also a UserWarning)
                 plan.store.invalidate(key)
             plan = build_plan(plan.pipeline)
     try:

@@ -120,6 +120,26 @@ def test_deeply_nested_json_in_an_engine_table_is_damage_not_a_traceback(project
             assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
 
 
+def test_a_damaged_array_is_reported_once(project, tmp_path):
+    """A changed array chunk: one ``warning:`` line naming the entry, through the engine's reporter (it was also
+    printed a second time as a raw UserWarning), and the entry is recomputed."""
+    args = ["run", str(project), "--workers", "0", "--summary-json", "s.json"]
+    assert cli(args, tmp_path).returncode == 0
+    plan = api.plan_pipeline(str(project), quiet=True)
+    key = plan.stages["dist"].tasks[0].key
+    chunks = [p for p in glob.glob(os.path.join(plan.store.object_path(key), "**", "*"), recursive=True)
+              if os.path.isfile(p) and not p.endswith("zarr.json")]
+    chunk = max(chunks, key=os.path.getsize)
+    data = bytearray(open(chunk, "rb").read())
+    data[-1] ^= 0xFF                                                   # same size, other content
+    open(chunk, "wb").write(bytes(data))
+    r = cli(args + ["--set", "sigma=2.0"], tmp_path)                  # summary reads the damaged tile
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.count(f"cache entry {key[:12]} is corrupt") == 1, r.stderr
+    assert "UserWarning" not in r.stderr and "warnings.warn" not in r.stderr, r.stderr
+    assert executed(json.load(open(tmp_path / "s.json")))["dist"] == 1
+
+
 def test_a_forged_engine_table_is_not_trusted(project, capsys):
     """A filehash.json row edited to claim an old digest for a changed file is not believed."""
     run_quiet(project)
