@@ -34,6 +34,11 @@ def _workers(text: str) -> int:
 def _output_file(example: str):
     """An argparse type for a file to write (--summary-json, report --out): not an existing folder."""
     def check(text: str) -> str:
+        from .store import expand_path
+        try:
+            text = expand_path(text)  # ~ and $VAR, as a shell would
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
         if os.path.isdir(text) or text.endswith(("/", os.sep)):
             raise argparse.ArgumentTypeError(f"'{text}' is a folder; give a file name, e.g. "
                                              f"{os.path.join(text, example)}")

@@ -28,8 +28,8 @@ from typing import Any
 import yaml
 
 from . import registry
-from .errors import PipelineError, warn_once
-from .store import cache_location
+from .errors import PipelineError, UserError, warn_once
+from .store import cache_location, expand_path
 
 TOP_KEYS = {"name", "description", "cache", "output", "params", "generated", "datasets", "stages"}
 STAGE_KEYS = {"function", "foreach", "pairs", "tile", "candidates", "inputs", "params", "metrics", "description"}
@@ -260,9 +260,19 @@ def load_pipeline(path: str, overrides: list[str] | tuple = (), cache_dir: str |
         name = _check_name(raw["name"], err, ("name",), what="the pipeline")
     else:  # from the file name, made a plain identifier
         name = re.sub(r"[^A-Za-z0-9_\-]", "_", os.path.splitext(os.path.basename(path))[0]).lstrip("-") or "pipeline"
+    def expanded(given: str | None, key: str, option: str) -> str | None:  # ~ and $VAR, as a shell would
+        text = given or raw.get(key)
+        try:
+            return expand_path(text) if text else None
+        except ValueError as exc:
+            if given:
+                raise UserError(f"{option}: {exc}", fix="set the variable, or write the folder out") from None
+            raise err(str(exc), key, fix="set the variable, or write the folder out") from None
+
     pipe = Pipeline(file=os.path.abspath(path), name=name,
-                    cache_dir=cache_location(cache_dir or raw.get("cache") or "cache"),
-                    output_dir=os.path.abspath(output_dir or raw.get("output") or os.path.join("results", name)),
+                    cache_dir=cache_location(expanded(cache_dir, "cache", "--cache") or "cache"),
+                    output_dir=os.path.abspath(expanded(output_dir, "output", "--out")
+                                               or os.path.join("results", name)),
                     params={}, generated={}, datasets={}, stages={}, raw=raw, overrides=list(overrides))
     resolver = _Resolver(raw["params"], pipe, err)
     pipe.generated = _read_generated(raw, err, resolver)

@@ -261,9 +261,41 @@ def is_url(location: str) -> bool:
     return bool(_URL.match(str(location)))
 
 
+_UNEXPANDED = re.compile(r"\$(\w+|\{[^}]*\})")
+
+
+def expand_path(path: str) -> str:
+    """``path`` with ``~`` / ``~user`` and ``$VAR`` / ``${VAR}`` expanded as a shell would (a URL as given).
+
+    Raises:
+        ValueError: naming what cannot be expanded (an undefined variable, an unknown user), so that no folder
+            literally named ``~`` or ``$HOME`` is ever created.
+    """
+    if is_url(path):
+        return path
+    out = os.path.expanduser(os.path.expandvars(path))
+    left = _UNEXPANDED.search(out)
+    if left:
+        raise ValueError(f"the path {path!r} names the environment variable {left.group(0)}, which is not set")
+    if out.startswith("~"):
+        raise ValueError(f"the path {path!r} starts with {out.split(os.sep)[0]!r}, which names no known user's "
+                         "home folder")
+    return out
+
+
 def cache_location(location: str) -> str:
-    """The cache as the store takes it: a URL as given (without a trailing ``/``), a local path made absolute."""
-    return location.rstrip("/") if is_url(location) else os.path.abspath(location)
+    """The cache as the store takes it: a URL as given (without a trailing ``/``), a local path with ``~`` and
+    ``$VAR`` expanded (see :func:`expand_path`) and made absolute.
+
+    Raises:
+        UserError: the path cannot be expanded.
+    """
+    if is_url(location):
+        return location.rstrip("/")
+    try:
+        return os.path.abspath(expand_path(location))
+    except ValueError as exc:
+        raise UserError(f"cache folder: {exc}", fix="set the variable, or write the folder out") from None
 
 
 _TMP_SUFFIX = r"(\.[0-9a-f]{32}\.tmp)?"   # a half-written file of atomic_write_text

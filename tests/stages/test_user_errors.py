@@ -18,7 +18,7 @@ from stages.config import load_pipeline
 from stages.errors import PipelineError, UserError
 from stages.store import Store
 
-from tests.helpers import ROOT, cli, free_port, make_project
+from tests.helpers import ROOT, SYNTHETIC_YAML, cli, free_port, make_project
 
 BILLION_LAUGHS = "\n".join(
     ['a0: &a0 ["lol","lol","lol","lol","lol","lol","lol","lol","lol"]']
@@ -269,3 +269,46 @@ def test_the_local_dashboard_listens_on_localhost_only(dask_client):
     hosts = {s.getsockname()[0] for s in sockets}
     assert hosts == {"127.0.0.1"}
     assert dask_client.cluster.dashboard_link.startswith("http://127.0.0.1:")
+
+
+# ---- issue 21 item 10: ~ and $VAR in path options -----------------------------------------------------
+def test_tilde_and_variables_in_path_options_are_expanded(project, tmp_path):
+    """--cache '~/c', --out '$OUT_BASE/o', --summary-json '~/s.json' and report --out '${OUT_BASE}/r.html' (quoted,
+    so no shell expanded them): the engine expands them, and creates no folder literally named '~' or '$...'."""
+    home = tmp_path / "home"
+    home.mkdir()
+    env = {"HOME": str(home), "OUT_BASE": str(tmp_path / "base")}
+    r = cli(["run", str(project), "--workers", "0", "--cache", "~/c", "--out", "$OUT_BASE/o",
+             "--summary-json", "~/s.json"], tmp_path, env=env)
+    assert r.returncode == 0, r.stderr
+    assert (home / "c" / ".stages-cache").is_file() and (home / "s.json").is_file()
+    assert (tmp_path / "base" / "o" / "metrics.json").is_file()
+    r = cli(["report", str(project), "--cache", "~/c", "--results", "${OUT_BASE}/o", "--out", "${OUT_BASE}/r.html"],
+            tmp_path, env=env)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "base" / "r.html").is_file()
+    assert not [n for n in os.listdir(tmp_path) if n.startswith(("~", "$"))]
+
+
+def test_tilde_in_the_pipelines_cache_and_output_is_expanded(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    p = make_project(tmp_path, yaml_text=SYNTHETIC_YAML + "cache: ~/yc\noutput: ~/yo\n")
+    pipe = load_pipeline(str(p))
+    assert pipe.cache_dir == str(tmp_path / "home" / "yc") and pipe.output_dir == str(tmp_path / "home" / "yo")
+
+
+@pytest.mark.parametrize("option", ["--cache", "--out", "--summary-json"])
+def test_an_undefined_variable_in_a_path_option_is_refused(project, tmp_path, option):
+    r = cli(["run", str(project), "--workers", "0", option, "$NO_SUCH_VARIABLE_XYZ/x"], tmp_path)
+    assert r.returncode in (1, 2) and "Traceback" not in r.stderr, r.stderr
+    assert "$NO_SUCH_VARIABLE_XYZ" in r.stderr and "not set" in r.stderr, r.stderr
+    assert not [n for n in os.listdir(tmp_path) if n.startswith("$")]
+
+
+def test_an_undefined_variable_in_the_pipelines_cache_names_the_key(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    p = make_project(tmp_path, yaml_text=SYNTHETIC_YAML + "cache: $NO_SUCH_VARIABLE_XYZ/c\n")
+    with pytest.raises(PipelineError, match="NO_SUCH_VARIABLE_XYZ") as err:
+        load_pipeline(str(p))
+    assert err.value.key == "cache" and err.value.line
