@@ -93,7 +93,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--metrics", default=None, metavar="A,B,...",
                    help="the metric columns printed (dotted keys or patterns such as 'accuracy.*'; default: the "
                         "headline measures)")
-    p.add_argument("--csv", default=None, metavar="PATH",
+    p.add_argument("--csv", default=None, metavar="PATH", type=_output_file("table.csv"),
                    help="also write the full table (every scalar metric) to PATH (.json: JSON)")
     p.add_argument("--quiet", action="store_true", help="no progress output (failures are still printed)")
 
