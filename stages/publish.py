@@ -170,10 +170,6 @@ def _publish(plan: Plan, out_root: str, verified: dict[str, dict[str, str]]) -> 
         if not all(plan.store.has(t.key) for t in sp.tasks):
             continue
         target = os.path.join(out_root, name)
-        if name not in owned and os.path.isdir(target) and os.listdir(target):
-            warn_once(f"{target} exists and was not written by the engine: stage '{name}' is not published "
-                      "there (move that folder away, or publish elsewhere with --out FOLDER)")
-            continue
         if os.path.lexists(target) and not os.path.isdir(target):
             warn_once(f"{target} exists and is not a folder: stage '{name}' is not published")
             continue
@@ -186,6 +182,14 @@ def _publish(plan: Plan, out_root: str, verified: dict[str, dict[str, str]]) -> 
                 if rel.split(os.sep)[0] != name:
                     raise CorruptEntry(t.key, f"stored file path {rel!r} leaves the stage's folder")
                 new[rel] = (src, file_checksum(src))
+        if name not in owned and os.path.isdir(target) and os.listdir(target):
+            present = _files_under(out_root, target)
+            if not present or not all(rel in new and _is_engines(os.path.join(out_root, rel), [new[rel][1]])
+                                      for rel in present):
+                warn_once(f"{target} exists and was not written by the engine: stage '{name}' is not published "
+                          "there (move that folder away, or publish elsewhere with --out FOLDER)")
+                continue
+            owned[name] = {rel: [new[rel][1]] for rel in present}  # exactly this stage's files: the engine's
         before = owned.get(name, {})
         mine = {rel: cs for rel, cs in before.items()
                 if os.path.lexists(os.path.join(out_root, rel)) and _is_engines(os.path.join(out_root, rel), cs)}
@@ -201,6 +205,9 @@ def _publish(plan: Plan, out_root: str, verified: dict[str, dict[str, str]]) -> 
         for rel, (src, sha) in sorted(new.items()):
             dst = os.path.join(out_root, rel)
             if os.path.lexists(dst) and rel not in mine:
+                if _is_engines(dst, [sha]):  # already holds exactly this content (e.g. the record was lost)
+                    kept[rel] = [sha]
+                    continue
                 warn_once(_NOT_YOURS.format(path=dst, where="the stage's version is in the cache"))
                 continue
             _copy_atomic(src, dst)
@@ -209,6 +216,12 @@ def _publish(plan: Plan, out_root: str, verified: dict[str, dict[str, str]]) -> 
         owned[name] = kept
         _save_record(out_root, owned, files)
     return written
+
+
+def _files_under(out_root: str, folder: str) -> list[str]:
+    """Paths relative to ``out_root`` of the files (and links) under ``folder``."""
+    return [os.path.relpath(os.path.join(d, f), out_root) for d, dirs, files in os.walk(folder) for f in files + [
+        x for x in dirs if os.path.islink(os.path.join(d, x))]]
 
 
 def _copy_atomic(src: str, dst: str) -> None:

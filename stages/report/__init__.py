@@ -91,9 +91,10 @@ def write_report(pipeline_path: str, overrides=(), cache_dir: str | None = None,
     html = render_html(ctx)
     if out is None:  # in the output folder: a file of the engine's own, never one of the user's replaced
         from ..errors import UserError
-        from ..publish import write_output_file
+        from ..publish import check_output_folder, write_output_file
 
         root = os.path.dirname(ctx.out_path)
+        check_output_folder(root, ctx.plan.store.root)
         if write_output_file(root, os.path.basename(ctx.out_path), lambda tmp: atomic_write_text(tmp, html)) is None:
             raise UserError(f"{ctx.out_path} exists and was not written by the engine: not replaced",
                             fix="write the report elsewhere with --out FILE, or move that file away")

@@ -226,3 +226,26 @@ def test_out_at_the_home_folder_is_an_error_line(project, tmp_path):
     assert r.returncode == 1 and "Traceback" not in r.stderr
     assert f"error: the output folder {home} is your home folder" in r.stderr, r.stderr
     assert os.listdir(home) == []
+
+
+def test_a_damaged_publish_record_does_not_block_publishing_unchanged_files(project, tmp_path, capsys):
+    """OUTPUT/.stages-published.json nested too deeply (or truncated): one warning; the published files that
+    still hold exactly the stage's content are taken back, so the next publish works again."""
+    out = tmp_path / "results" / "syn"
+    run_quiet(project)
+    (out / PUBLISHED_NAME).write_text("[" * 200000)
+    capsys.readouterr()
+    run_quiet(project)
+    assert f"warning: {out / PUBLISHED_NAME}" in capsys.readouterr().err
+    run_quiet(project, overrides=["rep.title=again"])
+    assert (out / "rep" / "summary.txt").read_text().startswith("again:")
+
+
+def test_the_default_report_refuses_a_dangerous_folder(project, tmp_path, monkeypatch):
+    from stages.report import write_report
+
+    run_quiet(project)
+    monkeypatch.setenv("HOME", str(tmp_path / "results"))
+    with pytest.raises(UserError, match="the engine does not publish there"):
+        write_report(str(project), output_dir=str(tmp_path / "results"))
+    assert not (tmp_path / "results" / "report.html").exists()
