@@ -300,6 +300,16 @@ def test_a_prefix_with_other_content_is_refused(project, bucket, s3fs_client):
     assert s3fs_client.ls(bucket, detail=False) == [f"{bucket}/holiday.jpg"]  # nothing written there
 
 
+@pytest.mark.parametrize("name", ["runs_2023.csv", "manifesto.txt", "objects-old"])
+def test_a_prefix_with_names_that_merely_start_like_the_engines_is_refused(project, bucket, s3fs_client, name):
+    path, _ = project
+    s3fs_client.pipe_file(f"{bucket}/{name}", b"not a cache")
+    with pytest.raises(UserError, match="not a stages cache") as err:
+        run_quiet(path, cache_dir=f"s3://{bucket}")
+    assert name in str(err.value)
+    assert s3fs_client.ls(bucket, detail=False) == [f"{bucket}/{name}"]  # nothing written there
+
+
 def test_a_missing_bucket_or_backend_is_a_clear_error(project, monkeypatch):
     path, _ = project
     with pytest.raises(UserError, match="does not exist"):
