@@ -65,7 +65,12 @@ def _read_record(out_root: str) -> tuple[dict[str, dict[str, list[str]]], dict[s
         return {}
     stages = rec.get("stages", {})
     stages = {k: paths(v) for k, v in stages.items()} if isinstance(stages, dict) else {}
+    if rec and "files" not in rec:  # a record of an older engine, which always wrote these there
+        return stages, {name: [] for name in _LEGACY_FILES}
     return stages, paths(rec.get("files", {}))
+
+
+_LEGACY_FILES = ("metrics.json", "report.html")
 
 
 def published_record(out_root: str) -> dict[str, list[str]]:
@@ -117,15 +122,18 @@ def check_output_folder(out_root: str, cache_root: str | None = None) -> None:
                         fix="give a folder of its own with --out FOLDER or 'output:' (e.g. results/NAME)")
 
 
-def write_output_file(out_root: str, rel: str, write) -> str | None:
+def write_output_file(out_root: str, rel: str, write,
+                      where: str | None = "the values are in the cache: `python -m stages results`") -> str | None:
     """Write one file of the engine's own (``metrics.json``, a sweep figure) at ``out_root/rel`` by calling
-    ``write(path)``, unless a file the engine did not write (or that was changed since) is there: then warn,
-    leave it and return None. Returns the path written; the file's checksum is recorded in the publish record.
+    ``write(path)``, unless a file the engine did not write (or that was changed since) is there: then warn
+    (``where``: where the content is instead; None: no warning, the caller reports it), leave it and return
+    None. Returns the path written; the file's checksum is recorded in the publish record.
     """
     owned, files = _read_record(out_root)
     dst = os.path.join(out_root, rel)
     if os.path.lexists(dst) and (rel not in files or not _is_engines(dst, files[rel])):
-        warn_once(_NOT_YOURS.format(path=dst, where="the values are in the cache: `python -m stages results`"))
+        if where is not None:
+            warn_once(_NOT_YOURS.format(path=dst, where=where))
         return None
     os.makedirs(os.path.dirname(dst), exist_ok=True)
     tmp = f"{dst}.{uuid.uuid4().hex}.tmp"

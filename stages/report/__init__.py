@@ -95,7 +95,8 @@ def write_report(pipeline_path: str, overrides=(), cache_dir: str | None = None,
 
         root = os.path.dirname(ctx.out_path)
         check_output_folder(root, ctx.plan.store.root)
-        if write_output_file(root, os.path.basename(ctx.out_path), lambda tmp: atomic_write_text(tmp, html)) is None:
+        if write_output_file(root, os.path.basename(ctx.out_path), lambda tmp: atomic_write_text(tmp, html),
+                             where=None) is None:
             raise UserError(f"{ctx.out_path} exists and was not written by the engine: not replaced",
                             fix="write the report elsewhere with --out FILE, or move that file away")
         return ctx.out_path

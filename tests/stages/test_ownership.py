@@ -249,3 +249,15 @@ def test_the_default_report_refuses_a_dangerous_folder(project, tmp_path, monkey
     with pytest.raises(UserError, match="the engine does not publish there"):
         write_report(str(project), output_dir=str(tmp_path / "results"))
     assert not (tmp_path / "results" / "report.html").exists()
+
+
+def test_metrics_json_under_a_record_of_an_older_engine_is_still_updated(project, tmp_path):
+    """A record from before the engine kept checksums (stages only, paths without checksums): the metrics.json
+    and report.html beside it were written by the engine (it always did), so they are still replaced."""
+    out = tmp_path / "results" / "syn"
+    run_quiet(project)
+    from stages.store import write_checked_json
+    write_checked_json(str(out / PUBLISHED_NAME), {"stages": {"rep": ["rep/summary.txt"]}})
+    (out / "metrics.json").write_text('{"old": 1}')
+    run_quiet(project, overrides=["sigma=2.0"])
+    assert json.loads((out / "metrics.json").read_text())["sigma"] == 2.0
