@@ -387,8 +387,8 @@ class _Resolver:
         return value
 
     def lookup(self, ref: str, where: tuple, seen: tuple = ()) -> Any:
-        if ref in self._done:
-            return self._done[ref]
+        if ref in self._done:  # a copy: whoever gets a list or dict may change it
+            return copy.deepcopy(self._done[ref]) if isinstance(self._done[ref], (dict, list)) else self._done[ref]
         if ref in seen:
             raise self.err(f"parameter reference cycle: {' -> '.join(seen + (ref,))}", *where)
         parts = ref.split(".")
@@ -406,7 +406,7 @@ class _Resolver:
             node = node[p]
         value = self._bounded(self.resolve(node, where, seen + (ref,)), f"'${{{ref}}}'", where)
         self._done[ref] = value
-        return value
+        return copy.deepcopy(value) if isinstance(value, (dict, list)) else value
 
     def resolve(self, value: Any, where: tuple, seen: tuple = ()) -> Any:
         if isinstance(value, dict):
