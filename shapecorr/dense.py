@@ -59,6 +59,12 @@ def dense_template(template_basis, *, n_patches: int = 300) -> dict:
     return S.to_arrays()
 
 
+def _which(mesh: dict) -> str:
+    """The mesh's file, and its item when that is another name (for messages)."""
+    item = mesh.get("item")
+    return mesh["name"] + (f" (item {item})" if item and item != os.path.splitext(mesh["name"])[0] else "")
+
+
 def _basis(arrays: dict, what: str) -> MeshBasis:
     return MeshBasis.from_arrays(arrays, source=f"corr.dense_basis of the {what}")
 
@@ -80,7 +86,11 @@ def dense_init(template_basis, target_basis, template_mesh, target_mesh, landmar
         raise ValueError(f"corr.dense_init: mode must be 'sparse' or 'auto', got {mode!r}")
     S, T = _basis(template_basis, "template"), _basis(target_basis, "target")
     if mode == "auto":
-        (C, p2p), *more = dense.automatic_hypotheses(S, T, hypotheses, k_init=k_init, k_end=k_end)
+        try:
+            (C, p2p), *more = dense.automatic_hypotheses(S, T, hypotheses, k_init=k_init, k_end=k_end)
+        except ValueError as exc:  # name the files: the message alone does not say which mesh
+            raise ValueError(f"{_which(target_mesh)} (template {_which(template_mesh)}): {exc}; give this mesh "
+                             "sparse landmarks and use mode 'sparse', or leave it out") from None
         out = {"C": C, "p2p_samples": p2p, "mode": mode}
         if more:
             out.update(C_more=np.asarray([c for c, _ in more]), p2p_samples_more=np.asarray([p for _, p in more]))

@@ -36,6 +36,11 @@ def _workers(text: str) -> int:
 def _output_file(example: str):
     """An argparse type for a file to write (--summary-json, report --out): not an existing folder."""
     def check(text: str) -> str:
+        from .store import expand_path
+        try:
+            text = expand_path(text)  # ~ and $VAR, as a shell would
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
         if os.path.isdir(text) or text.endswith(("/", os.sep)):
             raise argparse.ArgumentTypeError(f"'{text}' is a folder; give a file name, e.g. "
                                              f"{os.path.join(text, example)}")
@@ -109,7 +114,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--metrics", default=None, metavar="A,B,...",
                    help="the metric columns printed (dotted keys or patterns such as 'accuracy.*'; default: the "
                         "headline measures)")
-    p.add_argument("--csv", default=None, metavar="PATH",
+    p.add_argument("--csv", default=None, metavar="PATH", type=_output_file("table.csv"),
                    help="also write the full table (every scalar metric) to PATH (.json: JSON)")
     p.add_argument("--quiet", action="store_true", help="no progress output (failures are still printed)")
 

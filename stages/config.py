@@ -28,8 +28,8 @@ from typing import Any
 import yaml
 
 from . import registry
-from .errors import PipelineError, warn_once
-from .store import cache_location
+from .errors import PipelineError, UserError, warn_once
+from .store import cache_location, expand_path
 
 TOP_KEYS = {"name", "description", "cache", "output", "params", "generated", "datasets", "stages"}
 STAGE_KEYS = {"function", "foreach", "pairs", "tile", "candidates", "inputs", "params", "metrics", "description"}
@@ -93,6 +93,7 @@ class Pipeline:
 
 
 ALIAS_BUDGET = 10_000  # YAML nodes that aliases may add in total once expanded
+MAX_EXPANDED = 1_000_000  # characters and values one ${...} reference (or a string holding some) may expand to
 
 
 class YAMLRefused(yaml.MarkedYAMLError):
@@ -259,9 +260,19 @@ def load_pipeline(path: str, overrides: list[str] | tuple = (), cache_dir: str |
         name = _check_name(raw["name"], err, ("name",), what="the pipeline")
     else:  # from the file name, made a plain identifier
         name = re.sub(r"[^A-Za-z0-9_\-]", "_", os.path.splitext(os.path.basename(path))[0]).lstrip("-") or "pipeline"
+    def expanded(given: str | None, key: str, option: str) -> str | None:  # ~ and $VAR, as a shell would
+        text = given or raw.get(key)
+        try:
+            return expand_path(text) if text else None
+        except ValueError as exc:
+            if given:
+                raise UserError(f"{option}: {exc}", fix="set the variable, or write the folder out") from None
+            raise err(str(exc), key, fix="set the variable, or write the folder out") from None
+
     pipe = Pipeline(file=os.path.abspath(path), name=name,
-                    cache_dir=cache_location(cache_dir or raw.get("cache") or "cache"),
-                    output_dir=os.path.abspath(output_dir or raw.get("output") or os.path.join("results", name)),
+                    cache_dir=cache_location(expanded(cache_dir, "cache", "--cache") or "cache"),
+                    output_dir=os.path.abspath(expanded(output_dir, "output", "--out")
+                                               or os.path.join("results", name)),
                     params={}, generated={}, datasets={}, stages={}, raw=raw, overrides=list(overrides))
     resolver = _Resolver(raw["params"], pipe, err)
     pipe.generated = _read_generated(raw, err, resolver)
@@ -351,8 +362,33 @@ class _Resolver:
     def __init__(self, params: dict, pipe: Pipeline, err):
         self.params, self.pipe, self.err = params, pipe, err
         self.generated_used: set[str] = set()
+        self._done: dict[str, Any] = {}       # ref -> its resolved value (each parameter is resolved once)
+        self._sizes: dict[int, tuple[int, Any]] = {}  # id(list or dict built here) -> (size, the object)
+
+    def _size(self, value: Any) -> int:
+        """Characters of the strings plus number of values in ``value`` once written out (linear: the size of
+        every list and dict built here is remembered, so shared references are not walked again)."""
+        if isinstance(value, str):
+            return len(value)
+        if isinstance(value, (dict, list)):
+            hit = self._sizes.get(id(value))
+            if hit is not None and hit[1] is value:
+                return hit[0]
+            n = 1 + sum(self._size(v) for v in (value.values() if isinstance(value, dict) else value))
+            self._sizes[id(value)] = (n, value)
+            return n
+        return 1
+
+    def _bounded(self, value: Any, what: str, where: tuple) -> Any:
+        if self._size(value) > MAX_EXPANDED:
+            raise self.err(f"{what} expands to more than {MAX_EXPANDED:,} characters and values (references "
+                           "that repeat references, nested too deep?)", *where,
+                           fix="write the value out, or reference it fewer times")
+        return value
 
     def lookup(self, ref: str, where: tuple, seen: tuple = ()) -> Any:
+        if ref in self._done:  # a copy: whoever gets a list or dict may change it
+            return copy.deepcopy(self._done[ref]) if isinstance(self._done[ref], (dict, list)) else self._done[ref]
         if ref in seen:
             raise self.err(f"parameter reference cycle: {' -> '.join(seen + (ref,))}", *where)
         parts = ref.split(".")
@@ -368,7 +404,9 @@ class _Resolver:
                 raise self.err(f"unknown parameter reference '${{{ref}}}'", *where,
                                fix=_suggest(p, node if isinstance(node, dict) else []))
             node = node[p]
-        return self.resolve(node, where, seen + (ref,))
+        value = self._bounded(self.resolve(node, where, seen + (ref,)), f"'${{{ref}}}'", where)
+        self._done[ref] = value
+        return copy.deepcopy(value) if isinstance(value, (dict, list)) else value
 
     def resolve(self, value: Any, where: tuple, seen: tuple = ()) -> Any:
         if isinstance(value, dict):
@@ -399,8 +437,10 @@ class _Resolver:
                 head = got
             else:
                 text.append(str(got))
+            if sum(map(len, text)) > MAX_EXPANDED:
+                break   # reported below
         text.append(value[pos:])
-        rest = "".join(text)
+        rest = self._bounded("".join(text), f"'{value[:60]}'", where)
         return head.joined(rest) if head is not None else rest
 
 

@@ -15,12 +15,11 @@ import signal
 import sys
 import threading
 import time
-import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
-from .errors import UserError
-from .plan import Plan, Task
+from .errors import UserError, warn_once
+from .plan import Plan, Task, build_plan
 from .status import run_lines
 from .store import Store
 from .worker import TaskCall, TaskResult, TaskStatus, run_task
@@ -256,9 +255,7 @@ def _without_damaged(plan: Plan, log) -> Plan:
     if not plan.damaged_candidates:
         return plan
     for key, error in plan.damaged_candidates.items():
-        warnings.warn(f"{error}; recomputing it", stacklevel=1)
-        if log is not None:
-            log(f"warning: {error}; recomputing it")
+        warn_once(f"{error}; recomputing it")  # once, through the engine's reporter (not also a UserWarning)
         plan.store.invalidate(key)
     return plan.again()
 

@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from .errors import CorruptEntry, UserError, warn_once
-from .store import (CACHE_MARKER, FORMAT_VERSION, KEY_PATTERN, _CACHE_NAMES, _READ_CACHE, Store, _chunks_for,
+from .store import (CACHE_MARKER, FORMAT_VERSION, KEY_PATTERN, _CACHE_NAMES, _READ_CACHE, _TOO_DEEP, Store, _chunks_for,
                     _copy_arrays, _decode, _encode, _fill_value, _json_default, _manifest_problem, array_checksum,
                     claim_folder, file_checksum, manifest_checksum, read_checked_arrays, same_content)
 
@@ -83,23 +83,47 @@ class ObjectStore(Store):
 
     @property
     def fs(self):
-        """The fsspec file system (created on first use; options from the environment)."""
+        """The fsspec file system (created on first use; options from the environment), its calls raising
+        UserError when the store cannot be reached or refuses the credentials (see :meth:`_unreachable`)."""
         if self._fs is None:
             try:
                 import fsspec
-                self._fs = fsspec.filesystem(self.protocol, **_FS_OPTIONS)
+                self._fs = _Translated(fsspec.filesystem(self.protocol, **_FS_OPTIONS), self)
             except (ImportError, ValueError) as exc:
                 raise UserError(f"the cache {self._location} cannot be opened: {exc}", fix=_FIX_SETUP) from None
         return self._fs
+
+    def endpoint(self) -> str:
+        """The endpoint the store talks to, for messages."""
+        fs = self._fs.fs if self._fs is not None else None
+        url = (getattr(fs, "endpoint_url", None) or (getattr(fs, "client_kwargs", None) or {}).get("endpoint_url")
+               or os.environ.get("AWS_ENDPOINT_URL_S3") or os.environ.get("AWS_ENDPOINT_URL"))
+        return url or f"the default {self.protocol} endpoint"
 
     def _zarr_store(self, path: str, read_only: bool):
         import zarr
         return zarr.storage.FsspecStore.from_url(f"{self.protocol}://{path}", storage_options=dict(_FS_OPTIONS),
                                                  read_only=read_only)
 
-    def _unreachable(self, exc: Exception, doing: str) -> UserError:
-        return UserError(f"cannot {doing} the cache {self._location}: {type(exc).__name__}: "
-                         f"{str(exc).splitlines()[0] if str(exc) else 'no answer'}", fix=_FIX_SETUP)
+    def _unreachable(self, exc: BaseException, doing: str) -> UserError:
+        """The error to report when the store cannot be used (``exc``: what the client raised), naming the cache,
+        the endpoint and what to do; every entry stored so far stays stored."""
+        cause = _access_problem(exc) or exc
+        name = type(cause).__name__
+        detail = str(cause).splitlines()[0] if str(cause) else "no answer"
+        kept = "; every result stored so far is kept, run again once it answers"
+        if "Credential" in name or "credential" in detail.lower():
+            return UserError(f"cannot {doing} the cache {self._location} (endpoint {self.endpoint()}): no usable "
+                             f"credentials ({name}: {detail})",
+                             fix="set AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY (or AWS_PROFILE) on this machine "
+                                 "and on every worker, or use a local folder for --cache")
+        if _access_problem(exc) is not None:
+            return UserError(f"cannot {doing} the cache {self._location}: the endpoint {self.endpoint()} does not "
+                             f"answer ({name}: {detail})",
+                             fix="check that the server is running and reachable from here and from every worker, "
+                                 "and that AWS_ENDPOINT_URL names it" + kept)
+        return UserError(f"cannot {doing} the cache {self._location} (endpoint {self.endpoint()}): {name}: {detail}",
+                         fix=_FIX_SETUP)
 
     # paths (fsspec paths: bucket/prefix/...; manifest_path is the URL, for messages) --------------
     def _manifest_key(self, key: str) -> str:
@@ -151,7 +175,7 @@ class ObjectStore(Store):
         try:
             if self.is_marked():
                 return
-            foreign = [n for n in self._top_names() if not n.startswith(_CACHE_NAMES) and not n.startswith(".")]
+            foreign = [n for n in self._top_names() if n not in _CACHE_NAMES and not n.startswith(".")]
         except UserError:
             raise
         except OSError as exc:
@@ -205,6 +229,8 @@ class ObjectStore(Store):
             doc, problem = None, "is not UTF-8 text (overwritten or damaged)"
         except ValueError:
             doc, problem = None, "is not valid JSON (truncated or edited)"
+        except RecursionError:
+            doc, problem = None, _TOO_DEEP
         if problem is None and not (isinstance(doc.get("location"), str) and KEY_PATTERN.match(doc["location"])):
             problem = "names no data location (not written for an object store)"
         if problem is not None:
@@ -301,8 +327,10 @@ class ObjectStore(Store):
             manifest = json.loads(json.dumps(manifest, default=_json_default))  # the form a reader sees
             manifest["checksum"] = manifest_checksum(manifest)
             return self._commit(key, manifest)
-        except BaseException:
+        except BaseException as exc:
             self._remove_quietly(data)
+            if not isinstance(exc, UserError) and _access_problem(exc) is not None:
+                raise self._unreachable(exc, "write") from None
             raise
         finally:
             if files_dir:
@@ -328,7 +356,7 @@ class ObjectStore(Store):
     def _remove_quietly(self, path: str) -> None:
         try:
             self.fs.rm(path, recursive=True)
-        except (FileNotFoundError, OSError):
+        except (FileNotFoundError, OSError, UserError):
             pass
 
     # read --------------------------------------------------------------------------------------
@@ -346,9 +374,14 @@ class ObjectStore(Store):
         if cached is not None and cached[1] == signature:
             return _copy_arrays(cached[0])
         data = self._data(key, manifest["location"])
-        arrays = read_checked_arrays(key, manifest["arrays"], verify,
-                                     lambda name: self._zarr_store(f"{data}/{name}.zarr", read_only=True),
-                                     zarr_format=3)
+        try:
+            arrays = read_checked_arrays(key, manifest["arrays"], verify,
+                                         lambda name: self._zarr_store(f"{data}/{name}.zarr", read_only=True),
+                                         zarr_format=3)
+        except CorruptEntry as exc:
+            if _access_problem(exc) is not None:  # the server went away: not a reason to recompute the entry
+                raise self._unreachable(exc, "read") from None
+            raise
         value = _decode(manifest["tree"], arrays)
         _READ_CACHE.put(key, (value, signature), sum(a.nbytes for a in arrays.values()))
         return _copy_arrays(value)
@@ -439,6 +472,54 @@ class ObjectStore(Store):
         if not re.match(rf"^{re.escape(self.base)}/objects/[0-9a-f]{{2}}/[0-9a-f]{{32}}/[0-9a-f]{{32}}$", what):
             raise ValueError(f"refusing to remove {what}: not a writer prefix of the cache {self._location}")
         self._remove_quietly(what)
+
+
+def _access_problem(exc: BaseException | None) -> BaseException | None:
+    """The exception in ``exc``'s chain that says the store cannot be reached or refuses the client (connection
+    refused or reset, timeout, no credentials: botocore's errors, aiohttp's connection errors, ConnectionError),
+    or None (a missing object, a bad request: handled where they occur)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        names = {c.__name__ for c in type(exc).__mro__}
+        module = type(exc).__module__ or ""
+        if (isinstance(exc, (ConnectionError, TimeoutError)) or "BotoCoreError" in names
+                or "ClientConnectionError" in names or "ServerTimeoutError" in names
+                or (module.startswith(("botocore", "aiobotocore", "aiohttp")) and "Connect" in type(exc).__name__)):
+            return exc
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
+class _Translated:
+    """An fsspec file system whose calls raise ``store._unreachable(...)`` (a UserError naming the endpoint and
+    the fix) instead of the client's connection and credential errors; everything else passes through."""
+
+    def __init__(self, fs, store: "ObjectStore"):
+        self.fs, self._store = fs, store
+
+    def __getattr__(self, name: str):
+        attr = getattr(self.fs, name)
+        if not callable(attr):
+            return attr
+
+        def call(*args, **kwargs):
+            try:
+                return attr(*args, **kwargs)
+            except Exception as exc:
+                if _access_problem(exc) is None:
+                    raise
+                raise self._store._unreachable(exc, "write" if name in _WRITES else "read") from None
+        return call
+
+
+_WRITES = {"pipe_file", "put_file", "rm", "rm_file", "mkdir", "makedirs", "touch"}
+
+
+def _same_content(a: dict, b: dict) -> bool:
+    """True when two manifests of one key hold the same value: arrays, files, inline tree, and left-out items."""
+    return (all(a[f] == b[f] for f in ("tree", "arrays", "files"))
+            and a["info"].get("left_out", []) == b["info"].get("left_out", []))
 
 
 def _mtime(info: dict) -> float:

@@ -11,13 +11,12 @@ import json
 import os
 import sys
 import time
-import warnings
 
-from .errors import CorruptEntry, UserError
+from .errors import CorruptEntry, UserError, warn_once
 from .execute import clean_tmp, execute_rounds
 from .generated import write_generated
-from .plan import Plan, plan_pipeline
-from .publish import publish, verify_published
+from .plan import Plan, build_plan, plan_pipeline
+from .publish import check_output_folder, publish, verify_published, write_output_file
 from .record import build_record, load_record, note_keys, save_record
 from .results import metrics
 from .session import client_session, given_client, stderr_log
@@ -61,6 +60,7 @@ def prepare(plan: Plan, log) -> Plan:
     """Make a plan executable: write the generated datasets it waits for (then plan again, so their stages
     get tasks) and save the planner's caches. Only ``run`` and ``sweep`` call this; planning alone writes
     nothing."""
+    check_output_folder(plan.pipeline.output_dir, plan.store.root)
     plan.store.claim()
     if not plan.store.writable():
         raise UserError(f"cannot write the cache folder {plan.store.root} (read-only, or no permission)",
@@ -119,8 +119,7 @@ def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None,
             if not corrupt:
                 break
             for key, error in corrupt:
-                warnings.warn(f"{error}; recomputing it", stacklevel=1)
-                log(f"warning: {error}; recomputing it")
+                warn_once(f"{error}; recomputing it")  # once, through the engine's reporter (not also a UserWarning)
                 plan.store.invalidate(key)
             plan = plan.again()
     try:
@@ -142,8 +141,8 @@ def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None,
     m = metrics(plan)  # also when items failed: the metrics then list the items they left out (_left_out)
     if m and not plan.untargeted:  # a run of some targets does not replace the whole pipeline's metrics
         try:
-            atomic_write_text(os.path.join(plan.pipeline.output_dir, "metrics.json"),
-                              json.dumps(m, indent=2, default=str))
+            write_output_file(plan.pipeline.output_dir, "metrics.json", lambda tmp: atomic_write_text(
+                tmp, json.dumps(m, indent=2, default=str)))
         except OSError as exc:
             raise UserError(f"cannot write {os.path.join(plan.pipeline.output_dir, 'metrics.json')}: "
                             f"{exc.strerror or exc}", fix="make the output folder writable or use --out FOLDER") from None

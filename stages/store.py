@@ -100,6 +100,11 @@ def _read_json_bytes(path: str) -> tuple[Any, str | None]:
         return None, "is not UTF-8 text (overwritten or damaged)"
     except ValueError:
         return None, "is not valid JSON (truncated or edited)"
+    except RecursionError:  # e.g. '[' * 200000: damaged, like a truncated file (never a traceback)
+        return None, _TOO_DEEP
+
+
+_TOO_DEEP = "is nested too deeply to be read (damaged or not written by the engine)"
 
 
 def write_checked_json(path: str, obj: Any) -> None:
@@ -119,12 +124,15 @@ def read_checked_json(path: str, what: str, default: Any = None, kind: type | No
     if doc is _ABSENT:
         return default
     if problem is None:
-        if not isinstance(doc, dict) or set(doc) != {"checksum", "data"}:
-            problem = "was not written by this version of the engine"
-        elif digest_json(doc["data"]) != doc["checksum"]:
-            problem = "does not match its checksum (edited or damaged)"
-        elif kind is not None and not isinstance(doc["data"], kind):
-            problem = f"does not hold a {kind.__name__}"
+        try:
+            if not isinstance(doc, dict) or set(doc) != {"checksum", "data"}:
+                problem = "was not written by this version of the engine"
+            elif digest_json(doc["data"]) != doc["checksum"]:
+                problem = "does not match its checksum (edited or damaged)"
+            elif kind is not None and not isinstance(doc["data"], kind):
+                problem = f"does not hold a {kind.__name__}"
+        except RecursionError:  # parsed, but too deep to hash
+            problem = _TOO_DEEP
     if problem is not None:
         if warn:
             warn_once(f"{path} {problem}; {what}")
@@ -253,9 +261,75 @@ def is_url(location: str) -> bool:
     return bool(_URL.match(str(location)))
 
 
+_UNEXPANDED = re.compile(r"\$(\w+|\{[^}]*\})")
+
+
+def expand_path(path: str) -> str:
+    """``path`` with ``~`` / ``~user`` and ``$VAR`` / ``${VAR}`` expanded as a shell would (a URL as given).
+
+    Raises:
+        ValueError: naming what cannot be expanded (an undefined variable, an unknown user), so that no folder
+            literally named ``~`` or ``$HOME`` is ever created.
+    """
+    if is_url(path):
+        return path
+    out = os.path.expanduser(os.path.expandvars(path))
+    left = _UNEXPANDED.search(out)
+    if left:
+        raise ValueError(f"the path {path!r} names the environment variable {left.group(0)}, which is not set")
+    if out.startswith("~"):
+        raise ValueError(f"the path {path!r} starts with {out.split(os.sep)[0]!r}, which names no known user's "
+                         "home folder")
+    return out
+
+
 def cache_location(location: str) -> str:
-    """The cache as the store takes it: a URL as given (without a trailing ``/``), a local path made absolute."""
-    return location.rstrip("/") if is_url(location) else os.path.abspath(location)
+    """The cache as the store takes it: a URL as given (without a trailing ``/``), a local path with ``~`` and
+    ``$VAR`` expanded (see :func:`expand_path`) and made absolute.
+
+    Raises:
+        UserError: the path cannot be expanded.
+    """
+    if is_url(location):
+        return location.rstrip("/")
+    try:
+        return os.path.abspath(expand_path(location))
+    except ValueError as exc:
+        raise UserError(f"cache folder: {exc}", fix="set the variable, or write the folder out") from None
+
+
+_TMP_SUFFIX = r"(\.[0-9a-f]{32}\.tmp)?"   # a half-written file of atomic_write_text
+# the files the engine writes in a cache (relative paths, '/'-separated); tmp/ holds none that may be adopted
+_ENGINE_FILE = re.compile("^(?:" + "|".join([
+    r"manifest/[0-9a-f]{2}/[0-9a-f]{32}\.json" + _TMP_SUFFIX,
+    r"objects/[0-9a-f]{2}/[0-9a-f]{32}\.(?:zarr|files)/.+",
+    r"runs/[^/]+-[0-9a-f]{10}\.json" + _TMP_SUFFIX,
+    r"sweeps/[^/]+-[0-9a-f]{10}-[0-9a-f]{8}\.json" + _TMP_SUFFIX,
+    r"generated/[0-9a-f]{32}/.+",
+    r"(?:filehash|fingerprints)\.json" + _TMP_SUFFIX]) + ")$")
+
+
+def _foreign_content(root: str) -> list[str]:
+    """What in the unmarked folder ``root`` the engine did not write (relative paths, at most 5): a top-level
+    name that is not exactly one of the engine's, a file at a path the engine never writes, any file under
+    ``tmp/`` (its folders are cleaned wholesale, so only an empty one is adopted), any symbolic link.
+    Hidden top-level files (.DS_Store, .nfs*) do not count."""
+    foreign = sorted(n for n in os.listdir(root) if n not in _CACHE_NAMES and not n.startswith("."))
+    for top in sorted(n for n in os.listdir(root) if n in _CACHE_NAMES and n != CACHE_MARKER):
+        path = os.path.join(root, top)
+        if os.path.islink(path):
+            foreign.append(top)
+            continue
+        walk = os.walk(path) if os.path.isdir(path) else [(root, [], [top])]
+        for dirpath, dirnames, filenames in walk:
+            for n in dirnames + filenames:
+                full = os.path.join(dirpath, n)
+                rel = os.path.relpath(full, root).replace(os.sep, "/")
+                if os.path.islink(full) or (n in filenames and not _ENGINE_FILE.match(rel)):
+                    foreign.append(rel)
+            if len(foreign) >= 5:
+                return foreign[:5]
+    return foreign[:5]
 
 
 def claim_folder(root: str) -> None:
@@ -271,14 +345,13 @@ def claim_folder(root: str) -> None:
         raise UserError(f"the cache {root} is not a folder", fix="choose a folder for --cache / 'cache:'")
     if os.path.isdir(root):
         try:
-            foreign = sorted(n for n in os.listdir(root)  # hidden files (.DS_Store, .nfs*) do not count
-                             if not n.startswith(_CACHE_NAMES) and not n.startswith("."))
+            foreign = _foreign_content(root)
         except OSError as exc:
             raise UserError(f"cannot read the cache folder {root}: {exc.strerror}") from None
         if foreign:
             shown = ", ".join(foreign[:4]) + (" ..." if len(foreign) > 4 else "")
-            raise UserError(f"the cache folder {root} is not a stages cache (it holds {shown} and no "
-                            f"{CACHE_MARKER} marker): the engine does not write or clean there",
+            raise UserError(f"the cache folder {root} is not a stages cache (it holds {shown}, which the engine "
+                            f"did not write, and no {CACHE_MARKER} marker): the engine does not write or clean there",
                             fix="choose a new or empty folder for --cache / 'cache:' (e.g. ./cache)")
     try:
         os.makedirs(root, exist_ok=True)
@@ -610,6 +683,13 @@ def manifest_checksum(doc: dict) -> str:
 
 def _manifest_problem(doc: Any, key: str) -> str | None:
     """Why a parsed manifest cannot be trusted (None when it can)."""
+    try:
+        return _manifest_problem_of(doc, key)
+    except RecursionError:  # parsed, but too deep to hash
+        return _TOO_DEEP
+
+
+def _manifest_problem_of(doc: Any, key: str) -> str | None:
     if not isinstance(doc, dict) or any(f not in doc for f in _MANIFEST_FIELDS + ("checksum",)):
         return "is incomplete"
     if doc["format"] != FORMAT_VERSION:

@@ -12,6 +12,7 @@ import time
 from .errors import PipelineError
 from .execute import execute_rounds
 from .plan import plan_pipeline
+from .publish import write_output_file
 from .record import note_keys, pipeline_id
 from .results import metrics, scalar_metrics
 from .run import generated_names, prepare
@@ -81,8 +82,8 @@ def sweep(path: str, grids: list[str], overrides=(), workers: int = 2, scheduler
     record = sweep_path(plans[0], grids, overrides)
     result["figure_file"] = figure_name(plans[0].pipeline.name, grids, overrides)
     write_checked_json(record, json.loads(json.dumps(result, default=str)))
-    figure = os.path.join(plans[0].pipeline.output_dir, "sweeps", result["figure_file"])
-    result["figure"] = plot_sweep(rows, figure, first=result["headline"]["columns"])
+    figure = os.path.join("sweeps", result["figure_file"])
+    result["figure"] = plot_sweep(rows, plans[0].pipeline.output_dir, figure, first=result["headline"]["columns"])
     return result
 
 
@@ -114,12 +115,14 @@ def _varies(values: list[float]) -> bool:
     return hi - lo > 1e-9 * max(abs(lo), abs(hi), 1e-300)
 
 
-def plot_sweep(rows: list[dict], path: str, max_panels: int = 8, first: list[str] = ()) -> str | None:
+def plot_sweep(rows: list[dict], out_root: str, rel: str, max_panels: int = 8, first: list[str] = ()) -> str | None:
     """Plot the scalar metrics that vary across a one-axis numeric sweep against the swept value, leaving out
     constants and metrics that only repeat the swept parameter (``first``: the keys to plot first, e.g. the
     headline columns; then energies, accuracies, ...).
 
-    Returns the PNG written, or None when the sweep has several axes, one point, or nothing varies."""
+    Written to ``out_root/rel`` as a file of the engine's own (see :func:`stages.publish.write_output_file`).
+    Returns the PNG written, or None when the sweep has several axes, one point, or nothing varies (or a file
+    not written by the engine is in its place)."""
     axes_keys = list(dict.fromkeys(k for r in rows for k in r["point"]))
     if len(axes_keys) != 1 or len(rows) < 2:
         return None
@@ -152,10 +155,10 @@ def plot_sweep(rows: list[dict], path: str, max_panels: int = 8, first: list[str
     for ax in axs.ravel()[len(names):]:
         ax.axis("off")
     fig.tight_layout()
-    os.makedirs(os.path.dirname(path), exist_ok=True)
-    fig.savefig(path, dpi=100)
+    written = write_output_file(out_root, rel, lambda tmp: fig.savefig(tmp, dpi=100, format="png"),
+                                where="the sweep's values are in the table and its record in the cache")
     plt.close(fig)
-    return path
+    return written
 
 
 MAX_WIDTH = 120   # characters of the printed sweep table when the output is no terminal and COLUMNS is unset

@@ -93,6 +93,16 @@ def check_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", require_faces: 
         raise MeshError(f"{name}: {counted(len(bad), 'vertex', 'vertices')} used by a face "
                         f"{'has' if len(bad) == 1 else 'have'} a NaN or infinite coordinate "
                         f"(first: vertex {int(bad[0])}); repair the file or remove the mesh")
+    far = used[(np.abs(V[used]) > MAX_COORDINATE).any(axis=1)]
+    if len(far):
+        i = int(far[0])
+        raise MeshError(f"{name}: vertex {i} (0-based: vertex number {i + 1} of the file) is out of range: "
+                        f"({', '.join(f'{c:.3g}' for c in V[i])}), coordinates must be within +-{MAX_COORDINATE:g}"
+                        f"{f' ({len(far)} such vertices)' if len(far) > 1 else ''}; repair the file or remove "
+                        "the mesh")
+
+
+MAX_COORDINATE = 1e12   # |x|, |y|, |z| of a vertex a face uses: beyond, areas and distances lose all precision
 
 
 def _fan(poly: list[int]) -> list[tuple[int, int, int]]:

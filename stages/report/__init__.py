@@ -16,6 +16,8 @@ summary tables, shared with ``sweep``), ``sections`` (summary, figures, metrics,
 """
 from __future__ import annotations
 
+import os
+
 from .. import registry
 from ..store import atomic_write_text
 from .context import ReportContext, build_context
@@ -86,5 +88,17 @@ def write_report(pipeline_path: str, overrides=(), cache_dir: str | None = None,
             give what ``run --out`` was given).
     """
     ctx = build_context(pipeline_path, overrides, cache_dir, out, output_dir)
-    atomic_write_text(ctx.out_path, render_html(ctx))
+    html = render_html(ctx)
+    if out is None:  # in the output folder: a file of the engine's own, never one of the user's replaced
+        from ..errors import UserError
+        from ..publish import check_output_folder, write_output_file
+
+        root = os.path.dirname(ctx.out_path)
+        check_output_folder(root, ctx.plan.store.root)
+        if write_output_file(root, os.path.basename(ctx.out_path), lambda tmp: atomic_write_text(tmp, html),
+                             where=None) is None:
+            raise UserError(f"{ctx.out_path} exists and was not written by the engine: not replaced",
+                            fix="write the report elsewhere with --out FILE, or move that file away")
+        return ctx.out_path
+    atomic_write_text(ctx.out_path, html)
     return ctx.out_path

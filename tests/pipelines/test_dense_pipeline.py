@@ -159,3 +159,28 @@ def test_generator_params_are_checked():
         _check_humanoid(n_poses=2, seed=0, remeshed=["wobbly"])
     with pytest.raises(ValueError, match="at most n_poses = 1"):
         _check_humanoid(n_poses=1, seed=0, remeshed=["decimated", "decimated"])
+
+
+def test_dense_auto_init_on_a_two_triangle_mesh_names_the_file(tmp_path):
+    """A target of two triangles has too few extremities for the automatic initialisation: the error names the
+    target's file and item (it said only "need at least 3 feature points on each mesh, got 5 and 2")."""
+    from corr_core.geometry.mesh_io import save_obj
+    from shapecorr.correspondence import mesh
+    from shapecorr.dense import dense_basis, dense_init
+
+    from tests.helpers import sphere
+
+    V, F = sphere(600)
+    n = V / np.linalg.norm(V, axis=1, keepdims=True)
+    tips = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]]) / np.sqrt(3)
+    save_obj(tmp_path / "star.obj", n * (1 + 1.5 * (np.clip(n @ tips.T, 0, None) ** 6).sum(1))[:, None], F)  # 4 tips
+    save_obj(tmp_path / "flat.obj", np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.0]]),
+             np.array([[0, 1, 2], [1, 3, 2]]))
+    template, target = mesh(str(tmp_path / "star.obj"), item_name="star"), mesh(str(tmp_path / "flat.obj"),
+                                                                              item_name="scan_7")
+    bases = [dense_basis(m, k=30, n_samples=200) for m in (template, target)]
+    with pytest.raises(ValueError) as err:
+        dense_init(*bases, template, target, None, None, mode="auto", k_init=10, k_end=30)
+    msg = str(err.value)
+    assert msg.startswith("flat.obj (item scan_7)") and "the target has 2" in msg and "template" in msg
+    assert "sparse" in msg                                   # what to do

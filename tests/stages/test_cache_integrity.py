@@ -64,7 +64,8 @@ def test_an_edited_inline_value_is_detected_and_recomputed(project, capsys):
     assert api.metrics(api.plan_pipeline(str(project), quiet=True))["mean_affinity"] == true_value
 
 
-@pytest.mark.parametrize("damage", [b'{"format": 2, "key": "tru', b"\xff\xfe\x00garbage", b"null", b"[]", b""])
+@pytest.mark.parametrize("damage", [b'{"format": 2, "key": "tru', b"\xff\xfe\x00garbage", b"null", b"[]", b"",
+                                    b"[" * 200000, b'{"a":' * 5000 + b"1" + b"}" * 5000])
 def test_an_unreadable_manifest_counts_as_missing(project, capsys, damage):
     run_quiet(project)
     path = _manifest_of(project, "summary")
@@ -95,6 +96,48 @@ def test_unreadable_engine_tables_are_rebuilt(project, tmp_path, table):
     assert sum(executed(json.load(open(tmp_path / "s.json"))).values()) == 0  # the tables are only bookkeeping
     r = cli(["status", str(project)], tmp_path)     # rewritten: no warning the second time
     assert r.returncode == 0 and "warning:" not in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("table", ["filehash.json", "fingerprints.json", "published"])
+def test_deeply_nested_json_in_an_engine_table_is_damage_not_a_traceback(project, tmp_path, table):
+    """'[' * 200000 (or JSON nested deep enough that hashing it recurses too far) is read as a damaged file: one
+    warning naming it, then rebuilt; never a RecursionError that blocks every command."""
+    args = ["run", str(project), "--workers", "0", "--summary-json", "s.json"]
+    assert cli(args, tmp_path).returncode == 0
+    root = api.plan_pipeline(str(project), quiet=True).store.root
+    path = (os.path.join(tmp_path, "results", "syn", ".stages-published.json") if table == "published"
+            else os.path.join(root, table))
+    assert os.path.isfile(path)
+    for damage in (b"[" * 200000, b'{"checksum": "x", "data": ' + b"[" * 5000 + b"]" * 5000 + b"}"):
+        with open(path, "wb") as fh:
+            fh.write(damage)
+        r = cli(args, tmp_path)
+        assert r.returncode == 0 and "Traceback" not in r.stderr and "RecursionError" not in r.stderr, r.stderr
+        assert f"warning: {path}" in r.stderr, r.stderr
+        assert sum(executed(json.load(open(tmp_path / "s.json"))).values()) == 0
+        for cmd in (["status", str(project)], ["results", str(project)]):
+            r = cli(cmd, tmp_path)
+            assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+
+
+def test_a_damaged_array_is_reported_once(project, tmp_path):
+    """A changed array chunk: one ``warning:`` line naming the entry, through the engine's reporter (it was also
+    printed a second time as a raw UserWarning), and the entry is recomputed."""
+    args = ["run", str(project), "--workers", "0", "--summary-json", "s.json"]
+    assert cli(args, tmp_path).returncode == 0
+    plan = api.plan_pipeline(str(project), quiet=True)
+    key = plan.stages["dist"].tasks[0].key
+    chunks = [p for p in glob.glob(os.path.join(plan.store.object_path(key), "**", "*"), recursive=True)
+              if os.path.isfile(p) and not p.endswith("zarr.json")]
+    chunk = max(chunks, key=os.path.getsize)
+    data = bytearray(open(chunk, "rb").read())
+    data[-1] ^= 0xFF                                                   # same size, other content
+    open(chunk, "wb").write(bytes(data))
+    r = cli(args + ["--set", "sigma=2.0"], tmp_path)                  # summary reads the damaged tile
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.count(f"cache entry {key[:12]} is corrupt") == 1, r.stderr
+    assert "UserWarning" not in r.stderr and "warnings.warn" not in r.stderr, r.stderr
+    assert executed(json.load(open(tmp_path / "s.json")))["dist"] == 1
 
 
 def test_a_forged_engine_table_is_not_trusted(project, capsys):

@@ -95,6 +95,62 @@ def test_kill_9_then_resume_equals_uninterrupted_run(tmp_path):
             assert a[k] == b[k]
 
 
+def test_a_worker_killed_mid_run_then_resume_equals_uninterrupted_run(tmp_path):
+    """SIGKILL to one dask worker process (not the CLI) while tasks run: the run finishes (the task is run again
+    elsewhere, or reported failed), nothing stored is lost, and a resumed run gives the values of an
+    uninterrupted one."""
+    import psutil
+
+    work = "150"
+    slow = tmp_path / "killed"
+    slow.mkdir()
+    project = make_project(slow, n=24)
+    proc = subprocess.Popen([sys.executable, "-m", "stages", "run", "p.yaml", "--set", f"work={work}", "--quiet",
+                             "--workers", "2"], cwd=slow, env={**os.environ, **plugins_env()},
+                            start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    manifest = slow / "cache" / "manifest"
+    deadline = time.time() + 180
+    killed = None
+    try:
+        while time.time() < deadline and killed is None:
+            n = sum(len(f) for _, _, f in os.walk(manifest)) if manifest.exists() else 0
+            workers = [c for c in psutil.Process(proc.pid).children(recursive=True)
+                       if "spawn_main" in " ".join(c.cmdline())]   # the worker processes the nannies start
+            if n >= 4 and workers:
+                killed = max(workers, key=lambda c: c.cpu_times().user)  # the busier one: it runs a task
+                killed.send_signal(signal.SIGKILL)
+            time.sleep(0.05)
+        assert killed is not None, "no worker process found mid-run"
+        _, err = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode in (0, 1) and "Traceback" not in err, err
+    done_before = sum(len(f) for _, _, f in os.walk(manifest))
+    assert done_before >= 4
+    res = cli(["run", "p.yaml", "--set", f"work={work}", "--workers", "0", "--summary-json", "s.json"], cwd=slow)
+    assert res.returncode == 0, res.stderr
+    assert _summary(slow / "s.json")["stages"]["feat"]["cached"] >= 4
+    clean = tmp_path / "clean"
+    clean.mkdir()
+    make_project(clean, n=24)
+    assert cli(["run", "p.yaml", "--set", f"work={work}", "--workers", "0", "--quiet"], cwd=clean).returncode == 0
+    cwd = os.getcwd()
+    try:
+        a = _final_values(project, slow, [f"work={work}"])
+        b = _final_values(clean / "p.yaml", clean, [f"work={work}"])
+    finally:
+        os.chdir(cwd)
+    assert a.keys() == b.keys()
+    for k in a:
+        if isinstance(a[k], np.ndarray):
+            np.testing.assert_array_equal(a[k], b[k])
+        else:
+            assert a[k] == b[k]
+    assert (slow / "results" / "syn" / "rep" / "summary.txt").read_bytes() == \
+        (clean / "results" / "syn" / "rep" / "summary.txt").read_bytes()
+
+
 def test_two_runs_at_once_on_one_cache(tmp_path):
     make_project(tmp_path, n=30)
     env = {**os.environ, "PYTHONPATH": str(ROOT)}

@@ -84,3 +84,82 @@ def test_gc_leaves_entries_no_recorded_run_used_to_all(tmp_path, monkeypatch):
     assert api.gc(["p.yaml"], dry=True)["removed"] == 0
     res = api.gc(["p.yaml"], dry=True, everything=True)
     assert res["removed"] == 2 and {tuple(e["pipelines"]) for e in res["entries"]} == {("no recorded pipeline",)}
+
+
+# --- issue 21 item 2: a folder is adopted as a cache only when it holds exactly what the engine writes ---
+
+import os  # noqa: E402
+import shutil  # noqa: E402
+import time  # noqa: E402
+import uuid  # noqa: E402
+
+from stages.errors import UserError  # noqa: E402
+from stages.store import CACHE_MARKER  # noqa: E402
+
+from tests.helpers import run_quiet  # noqa: E402
+
+_HEX = "0123456789abcdef" * 2
+_USER_FILES = ["manifesto.txt", "runs_2023.csv", "objects_old/a.txt", "tmp/dask-worker-space/keep.txt",
+               f"tmp/{_HEX}/thesis.tex", "objects/ab/notes.txt", f"manifest/ab/{_HEX}.json.bak"]
+
+
+@pytest.mark.parametrize("user_file", _USER_FILES)
+def test_a_folder_with_a_user_file_is_not_adopted_and_gc_removes_nothing(project, tmp_path, user_file):
+    """Names that merely start like the engine's (manifesto.txt, runs_2023.csv), or files where the engine
+    never writes (anything under tmp/, a stray file in objects/): not a cache; run refuses it naming the file,
+    and gc removes nothing there."""
+    folder = tmp_path / "folder"
+    f = folder / user_file
+    f.parent.mkdir(parents=True)
+    f.write_text("years of work\n")
+    old = time.time() - 10 * 3600
+    for p in [f, *f.parents]:   # old enough for any cleanup of temporary folders
+        if folder in p.parents or p == folder:
+            os.utime(p, (old, old))
+    with pytest.raises(UserError, match="is not a stages cache") as err:
+        run_quiet(project, cache_dir=str(folder))
+    top = user_file.split("/")[0]
+    assert (user_file if top in ("tmp", "objects", "manifest") else top) in str(err.value)
+    with pytest.raises(UserError, match=CACHE_MARKER):
+        api.gc([str(project)], cache_dir=str(folder))
+    assert f.read_text() == "years of work\n"
+    assert not (folder / CACHE_MARKER).exists()
+
+
+def test_a_cache_from_before_the_marker_is_still_adopted(project, tmp_path):
+    run_quiet(project)
+    cache = tmp_path / "cache"
+    (cache / CACHE_MARKER).unlink()
+    shutil.rmtree(cache / "tmp", ignore_errors=True)
+    s = run_quiet(project)
+    assert (cache / CACHE_MARKER).is_file() and sum(x["executed"] for x in s["stages"].values()) == 0
+
+
+def test_gc_does_not_follow_links_out_of_the_cache(project, tmp_path):
+    """Links inside the cache (in place of an entry's data, of a generated dataset, of a temporary folder, or
+    inside an entry) pointing outside it: gc removes the links at most, never what they point to."""
+    run_quiet(project)
+    run_quiet(project, overrides=["sigma=3"])                    # summary, rep of sigma=3: unreachable below
+    cache = tmp_path / "cache"
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    for i in range(4):
+        (outside / f"d{i}").mkdir()
+        (outside / f"d{i}" / "keep.txt").write_text(f"precious {i}\n")
+        (outside / f"d{i}" / ".complete").write_text("{}")
+    plan = api.plan_pipeline(str(project), ["sigma=3"], quiet=True)
+    gone = plan.stages["summary"].tasks[0].key                   # removed by gc: its data folder is a link
+    shutil.rmtree(plan.store.object_path(gone), ignore_errors=True)
+    os.makedirs(os.path.dirname(plan.store.object_path(gone)), exist_ok=True)
+    os.symlink(outside / "d0", plan.store.object_path(gone))
+    rep = plan.stages["rep"].tasks[0].key                        # removed: a link inside its files folder
+    os.symlink(outside / "d1", os.path.join(plan.store.files_path(rep), "link"))
+    (cache / "generated").mkdir(exist_ok=True)
+    os.symlink(outside / "d2", cache / "generated" / _HEX)      # looks like a generated dataset
+    (cache / "tmp").mkdir(exist_ok=True)
+    os.symlink(outside / "d3", cache / "tmp" / uuid.uuid4().hex)  # looks like a temporary folder
+    res = api.gc([str(project)])
+    assert res["removed"] == 2
+    for i in range(4):
+        assert (outside / f"d{i}" / "keep.txt").read_text() == f"precious {i}\n"
+        assert (outside / f"d{i}" / ".complete").is_file()

@@ -2,6 +2,7 @@
 OUTPUT/.stages-published.json), and nothing is cleaned in a cache folder without the engine's marker."""
 from __future__ import annotations
 
+import json
 import os
 import time
 import uuid
@@ -13,7 +14,7 @@ from stages.errors import UserError
 from stages.publish import PUBLISHED_NAME
 from stages.store import CACHE_MARKER
 
-from tests.helpers import SYNTHETIC_YAML, make_project, run_quiet
+from tests.helpers import SYNTHETIC_YAML, cli, make_project, run_quiet
 
 
 @pytest.fixture()
@@ -118,3 +119,145 @@ def test_gc_removes_only_what_the_engine_created(project, tmp_path):
     assert res["removed"] == 2                    # summary and rep of sigma=3
     assert (mine / "a.obj").is_file()
     assert (cache / "manifest" / "zz" / "notes.json").is_file()
+
+
+# --- issue 21 item 1: the engine's own files in the output folder, and folders it must never publish into ---
+
+def test_a_users_metrics_json_is_never_replaced(project, tmp_path, capsys):
+    """A metrics.json of the user's in the output folder (there before the first run, or put in place of the
+    engine's later) is left as it is, with a warning naming it; the values stay readable from the cache."""
+    out = tmp_path / "results" / "syn"
+    out.mkdir(parents=True)
+    (out / "metrics.json").write_text("precious\n")
+    run_quiet(project)
+    assert (out / "metrics.json").read_text() == "precious\n"
+    assert f"{out / 'metrics.json'} exists and was not written by the engine" in capsys.readouterr().err
+    assert api.metrics(api.plan_pipeline(str(project), quiet=True))["mean_affinity"] > 0
+
+    other = tmp_path / "elsewhere"   # --out at a folder holding such a file: the same
+    other.mkdir()
+    (other / "metrics.json").write_text("mine too\n")
+    run_quiet(project, output_dir=str(other))
+    assert (other / "metrics.json").read_text() == "mine too\n"
+    assert (other / "rep" / "summary.txt").is_file()            # the rest is published
+
+
+def test_the_engines_metrics_json_replaced_by_the_user_is_kept(project, tmp_path, capsys):
+    out = tmp_path / "results" / "syn"
+    run_quiet(project)
+    first = json.loads((out / "metrics.json").read_text())
+    run_quiet(project, overrides=["sigma=2.0"])                 # the engine replaces its own file
+    assert json.loads((out / "metrics.json").read_text()) != first
+    (out / "metrics.json").write_text("precious\n")             # now the user's
+    capsys.readouterr()
+    run_quiet(project, overrides=["sigma=3.0"])
+    assert (out / "metrics.json").read_text() == "precious\n"
+    assert "metrics.json exists and was not written by the engine" in capsys.readouterr().err
+
+
+def test_a_published_file_the_user_edited_is_not_overwritten_or_removed(project, tmp_path, capsys):
+    stage_dir = tmp_path / "results" / "syn" / "rep"
+    run_quiet(project)
+    (stage_dir / "summary.txt").write_text("my edits\n")
+    run_quiet(project, overrides=["rep.title=second"])
+    assert (stage_dir / "summary.txt").read_text() == "my edits\n"
+    assert "summary.txt exists and was not written by the engine" in capsys.readouterr().err
+    os.remove(stage_dir / "summary.txt")                          # moved away: published again
+    run_quiet(project, overrides=["rep.title=third"])
+    assert (stage_dir / "summary.txt").read_text().startswith("third:")
+
+
+def test_the_default_report_does_not_replace_a_users_report_html(project, tmp_path):
+    from stages.report import write_report
+
+    run_quiet(project)
+    out = tmp_path / "results" / "syn"
+    first = write_report(str(project))
+    assert first == str(out / "report.html")
+    assert write_report(str(project)) == first                   # its own file: replaced
+    (out / "report.html").write_text("<p>my report</p>\n")
+    with pytest.raises(UserError, match="report.html exists and was not written by the engine"):
+        write_report(str(project))
+    assert (out / "report.html").read_text() == "<p>my report</p>\n"
+
+
+def test_a_sweep_figure_does_not_replace_a_users_file(tmp_path, capsys):
+    from stages.sweep import plot_sweep
+
+    rows = [{"point": {"sigma": str(s)}, "metrics": {"m": s * 2.0}} for s in (1, 2, 3)]
+    assert plot_sweep(rows, str(tmp_path), "sweeps/a.png") == str(tmp_path / "sweeps" / "a.png")
+    assert plot_sweep(rows, str(tmp_path), "sweeps/a.png")       # its own: replaced
+    (tmp_path / "sweeps" / "b.png").write_bytes(b"my picture")
+    assert plot_sweep(rows, str(tmp_path), "sweeps/b.png") is None
+    assert (tmp_path / "sweeps" / "b.png").read_bytes() == b"my picture"
+    assert "b.png exists and was not written by the engine" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("where", ["root", "mount", "home", "above-home", "cache", "inside-cache"])
+def test_an_output_folder_where_publishing_could_do_harm_is_refused(project, tmp_path, monkeypatch, where):
+    """Tested on stand-ins (a HOME under tmp_path; a folder the test declares a mount point, or the root of the
+    file system as os.path sees it for a folder declared to be its own parent), so that a broken check
+    publishes into tmp_path, never into / or the real home folder."""
+    home = tmp_path / "home" / "me"
+    home.mkdir(parents=True)
+    monkeypatch.setenv("HOME", str(home))
+    standin = tmp_path / "standin"
+    standin.mkdir()
+    if where == "mount":
+        real_ismount = os.path.ismount
+        monkeypatch.setattr(os.path, "ismount", lambda p: os.path.realpath(p) == str(standin) or real_ismount(p))
+    if where == "root":
+        real_dirname = os.path.dirname
+        monkeypatch.setattr(os.path, "dirname", lambda p: p if p == str(standin) else real_dirname(p))
+    out = {"root": str(standin), "mount": str(standin), "home": str(home), "above-home": str(home.parent),
+           "cache": str(tmp_path / "cache"), "inside-cache": str(tmp_path / "cache" / "results")}[where]
+    before = sorted(os.listdir(out)) if os.path.isdir(out) else None
+    with pytest.raises(UserError, match="the engine does not publish there") as err:
+        run_quiet(project, output_dir=out)
+    monkeypatch.undo()
+    assert out in str(err.value) and "--out" in err.value.fix
+    assert (sorted(os.listdir(out)) if os.path.isdir(out) else None) == before   # nothing written there
+
+
+def test_out_at_the_home_folder_is_an_error_line(project, tmp_path):
+    home = tmp_path / "home"
+    home.mkdir()
+    r = cli(["run", str(project), "--workers", "0", "--out", str(home)], tmp_path, env={"HOME": str(home)})
+    assert r.returncode == 1 and "Traceback" not in r.stderr
+    assert f"error: the output folder {home} is your home folder" in r.stderr, r.stderr
+    assert os.listdir(home) == []
+
+
+def test_a_damaged_publish_record_does_not_block_publishing_unchanged_files(project, tmp_path, capsys):
+    """OUTPUT/.stages-published.json nested too deeply (or truncated): one warning; the published files that
+    still hold exactly the stage's content are taken back, so the next publish works again."""
+    out = tmp_path / "results" / "syn"
+    run_quiet(project)
+    (out / PUBLISHED_NAME).write_text("[" * 200000)
+    capsys.readouterr()
+    run_quiet(project)
+    assert f"warning: {out / PUBLISHED_NAME}" in capsys.readouterr().err
+    run_quiet(project, overrides=["rep.title=again"])
+    assert (out / "rep" / "summary.txt").read_text().startswith("again:")
+
+
+def test_the_default_report_refuses_a_dangerous_folder(project, tmp_path, monkeypatch):
+    from stages.report import write_report
+
+    run_quiet(project)
+    monkeypatch.setenv("HOME", str(tmp_path / "results"))
+    with pytest.raises(UserError, match="the engine does not publish there"):
+        write_report(str(project), output_dir=str(tmp_path / "results"))
+    assert not (tmp_path / "results" / "report.html").exists()
+
+
+def test_metrics_json_under_a_record_of_an_older_engine_is_still_updated(project, tmp_path):
+    """A record from before the engine kept checksums (stages only, paths without checksums): the metrics.json
+    and report.html beside it were written by the engine (it always did), so they are still replaced."""
+    out = tmp_path / "results" / "syn"
+    run_quiet(project)
+    from stages.store import write_checked_json
+    write_checked_json(str(out / PUBLISHED_NAME), {"stages": {"rep": ["rep/summary.txt"]}})
+    (out / "metrics.json").write_text('{"old": 1}')
+    run_quiet(project, overrides=["sigma=2.0"])
+    assert json.loads((out / "metrics.json").read_text())["sigma"] == 2.0

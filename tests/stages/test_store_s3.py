@@ -300,6 +300,16 @@ def test_a_prefix_with_other_content_is_refused(project, bucket, s3fs_client):
     assert s3fs_client.ls(bucket, detail=False) == [f"{bucket}/holiday.jpg"]  # nothing written there
 
 
+@pytest.mark.parametrize("name", ["runs_2023.csv", "manifesto.txt", "objects-old"])
+def test_a_prefix_with_names_that_merely_start_like_the_engines_is_refused(project, bucket, s3fs_client, name):
+    path, _ = project
+    s3fs_client.pipe_file(f"{bucket}/{name}", b"not a cache")
+    with pytest.raises(UserError, match="not a stages cache") as err:
+        run_quiet(path, cache_dir=f"s3://{bucket}")
+    assert name in str(err.value)
+    assert s3fs_client.ls(bucket, detail=False) == [f"{bucket}/{name}"]  # nothing written there
+
+
 def test_a_missing_bucket_or_backend_is_a_clear_error(project, monkeypatch):
     path, _ = project
     with pytest.raises(UserError, match="does not exist"):
@@ -327,3 +337,85 @@ def test_the_report_names_the_cache_url_and_its_local_folder(project, tmp_path):
     rows = dict(re.findall(r"<tr><td>(cache[^<]*)</td><td>([^<]*)</td></tr>", html))
     assert rows == {"cache": cache, "cache local folder": Store(cache).root}
     assert str(tmp_path / "local") in rows["cache local folder"]
+
+
+# --- issue 21 item 6: a store that does not answer, or refuses the client, is an error line, never a traceback ---
+
+def _no_retries(env: dict) -> dict:
+    """botocore retries a refused connection for ~20 s by default: once is enough here."""
+    return {**env, "AWS_MAX_ATTEMPTS": "1", "AWS_RETRY_MODE": "standard"}
+
+
+def test_an_unreachable_endpoint_is_an_error_line_naming_it(project, tmp_path, s3_endpoint):
+    path, cache = project
+    dead = f"http://127.0.0.1:{free_port()}"
+    for cmd in (["run", str(path), "--workers", "0"], ["status", str(path)], ["gc", str(path)]):
+        proc = _cli([*cmd, "--cache", cache], tmp_path, _no_retries({**s3_endpoint, "AWS_ENDPOINT_URL": dead}),
+                    str(tmp_path / "local"))
+        _, err = proc.communicate(timeout=120)
+        assert proc.returncode == 1, (cmd, err)
+        assert "Traceback" not in err and f"error: cannot read the cache {cache}" in err, (cmd, err)
+        assert f"the endpoint {dead} does not answer" in err and "fix: check that the server is running" in err
+
+
+def test_missing_credentials_are_an_error_line_saying_what_to_set(project, tmp_path, s3_endpoint):
+    path, cache = project
+    env = {**os.environ, **plugins_env(), "STAGES_LOCAL_CACHE": str(tmp_path / "local"), "HOME": str(tmp_path),
+           "AWS_ENDPOINT_URL": s3_endpoint["AWS_ENDPOINT_URL"], "AWS_EC2_METADATA_DISABLED": "true",
+           "AWS_SHARED_CREDENTIALS_FILE": str(tmp_path / "none"), "AWS_CONFIG_FILE": str(tmp_path / "none")}
+    for k in ("AWS_ACCESS_KEY_ID", "AWS_SECRET_ACCESS_KEY", "AWS_SESSION_TOKEN", "AWS_PROFILE"):
+        env.pop(k, None)
+    r = subprocess.run([sys.executable, "-m", "stages", "run", str(path), "--workers", "0", "--cache", cache],
+                       cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
+    assert f"error: cannot read the cache {cache} (endpoint {s3_endpoint['AWS_ENDPOINT_URL']}): no usable " \
+           "credentials" in r.stderr, r.stderr
+    assert "AWS_ACCESS_KEY_ID" in r.stderr
+
+
+def test_a_server_killed_mid_run_keeps_what_was_stored(tmp_path, monkeypatch):
+    """The S3 server stops while a run stores per-item results: the run ends with an error line naming the
+    endpoint (no traceback); once the server is back, every entry stored before is there and complete, and the
+    next run computes only the rest."""
+    import time
+
+    from moto.server import ThreadedMotoServer
+
+    port = free_port()
+    endpoint = f"http://127.0.0.1:{port}"
+    env = _no_retries({**S3_ENV, "AWS_ENDPOINT_URL": endpoint})
+    for k, v in env.items():
+        monkeypatch.setenv(k, v)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("STAGES_LOCAL_CACHE", str(tmp_path / "local"))
+    server = ThreadedMotoServer(ip_address="127.0.0.1", port=port, verbose=False)
+    server.start()
+    try:
+        import fsspec
+        fs = fsspec.filesystem("s3", use_listings_cache=False)
+        bucket = "k" + uuid.uuid4().hex[:12]
+        fs.mkdir(bucket)
+        cache = f"s3://{bucket}/cache"
+        path = make_project(tmp_path, n=12)
+        proc = _cli(["run", str(path), "--cache", cache, "--workers", "0", "--set", "work=400"], tmp_path, env,
+                    str(tmp_path / "local"))
+        deadline = time.time() + 120
+        while time.time() < deadline and len(fs.find(f"{cache}/manifest")) < 3:
+            time.sleep(0.2)
+        server.stop()                                    # mid-run: 3 or more of the 12 items stored
+        _, err = proc.communicate(timeout=180)
+        assert proc.returncode == 1, err
+        assert "Traceback" not in err and f"the endpoint {endpoint} does not answer" in err, err
+    finally:
+        server = ThreadedMotoServer(ip_address="127.0.0.1", port=port, verbose=False)  # back, with its data
+        server.start()
+    try:
+        plan = api.plan_pipeline(str(path), ["work=400"], cache_dir=cache, quiet=True)
+        stored = [t for t in plan.stages["feat"].tasks if plan.store.has(t.key)]
+        assert 3 <= len(stored) < 12
+        for t in stored:
+            plan.store.get(t.key)                        # complete and checksummed
+        s = run_quiet(path, cache_dir=cache, overrides=["work=400"])
+        assert executed(s)["feat"] == 12 - len(stored)
+    finally:
+        server.stop()

@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import os
 
 import pytest
 
@@ -95,11 +96,11 @@ def test_sweep_plot_leaves_out_trivial_panels_and_is_named_after_the_parameters(
             for i, x in enumerate(["0.5", "1", "2"])]
     path = str(tmp_path / "sweeps" / figure_name("demo pipe", ["align.sigma_scale=0.5,1,2"]))
     assert path.endswith("sweeps/demo_pipe_align.sigma_scale=0.5,1,2.png")
-    assert plot_sweep(rows, path) == path
+    assert plot_sweep(rows, str(tmp_path), os.path.relpath(path, tmp_path)) == path
     import matplotlib.image
     assert matplotlib.image.imread(path).shape[1] <= 3.4 * 100 + 1  # one panel (accuracy), not three
     only_trivial = [{"point": r["point"], "metrics": {"sigma": r["metrics"]["sigma"], "energy": 7.0}} for r in rows]
-    assert plot_sweep(only_trivial, str(tmp_path / "none.png")) is None
+    assert plot_sweep(only_trivial, str(tmp_path), "none.png") is None
 
 
 def test_write_table_csv_and_json(tmp_path):

@@ -18,7 +18,7 @@ from stages.config import load_pipeline
 from stages.errors import PipelineError, UserError
 from stages.store import Store
 
-from tests.helpers import ROOT, cli, free_port, make_project
+from tests.helpers import ROOT, SYNTHETIC_YAML, cli, free_port, make_project
 
 BILLION_LAUGHS = "\n".join(
     ['a0: &a0 ["lol","lol","lol","lol","lol","lol","lol","lol","lol"]']
@@ -48,6 +48,36 @@ def test_a_billion_laughs_file_fails_fast(tmp_path):
     p.write_text(BILLION_LAUGHS)
     assert p.stat().st_size < 1024
     _fails(cli(["status", str(p)], tmp_path, timeout=60), 2, "aliases expand to more than")
+
+
+def _reference_bomb(levels: int, as_list: bool) -> str:
+    """``l{i}`` made of 10 references to ``l{i-1}``: 10**levels copies once expanded (a string, or nested lists)."""
+    lines = ["params:", '  l0: "abcdefghij"']
+    for i in range(1, levels + 1):
+        refs = ["${l%d}" % (i - 1)] * 10
+        lines.append(f"  l{i}: " + (json.dumps(refs) if as_list else '"' + "".join(refs) + '"'))
+    return "\n".join(lines + [
+        "stages: {s: {function: synthetic.summarize, inputs: {distances: d}, params: {sigma: 1}},",
+        "         d: {function: synthetic.pair_distances, pairs: items}}",
+        "datasets: {items: {files: 'data/*.txt', optional: true}}", ""])
+
+
+@pytest.mark.parametrize("as_list", [False, True], ids=["string", "list"])
+def test_a_reference_bomb_fails_fast_naming_the_key(tmp_path, as_list):
+    """11 levels of ten ${...} references each (10**11 copies): an error naming the parameter that grows too
+    large, within seconds (it used to hang), like the alias bomb."""
+    p = tmp_path / "bomb.yaml"
+    p.write_text(_reference_bomb(11, as_list))
+    _fails(cli(["status", str(p)], tmp_path, timeout=60), 2, "expands to more than", "bomb.yaml:")  # first: a hang
+    with pytest.raises(PipelineError, match="expands to more than") as err:                      # times out
+        load_pipeline(str(p))
+    assert err.value.key.startswith("params.l") and err.value.line
+
+
+def test_references_used_many_times_still_resolve(tmp_path):
+    p = tmp_path / "ok.yaml"
+    p.write_text(_reference_bomb(3, as_list=False))
+    assert load_pipeline(str(p)).params["l3"] == "abcdefghij" * 1000
 
 
 def test_a_recursive_alias_is_refused(tmp_path):
@@ -239,3 +269,46 @@ def test_the_local_dashboard_listens_on_localhost_only(dask_client):
     hosts = {s.getsockname()[0] for s in sockets}
     assert hosts == {"127.0.0.1"}
     assert dask_client.cluster.dashboard_link.startswith("http://127.0.0.1:")
+
+
+# ---- issue 21 item 10: ~ and $VAR in path options -----------------------------------------------------
+def test_tilde_and_variables_in_path_options_are_expanded(project, tmp_path):
+    """--cache '~/c', --out '$OUT_BASE/o', --summary-json '~/s.json' and report --out '${OUT_BASE}/r.html' (quoted,
+    so no shell expanded them): the engine expands them, and creates no folder literally named '~' or '$...'."""
+    home = tmp_path / "home"
+    home.mkdir()
+    env = {"HOME": str(home), "OUT_BASE": str(tmp_path / "base")}
+    r = cli(["run", str(project), "--workers", "0", "--cache", "~/c", "--out", "$OUT_BASE/o",
+             "--summary-json", "~/s.json"], tmp_path, env=env)
+    assert r.returncode == 0, r.stderr
+    assert (home / "c" / ".stages-cache").is_file() and (home / "s.json").is_file()
+    assert (tmp_path / "base" / "o" / "metrics.json").is_file()
+    r = cli(["report", str(project), "--cache", "~/c", "--results", "${OUT_BASE}/o", "--out", "${OUT_BASE}/r.html"],
+            tmp_path, env=env)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "base" / "r.html").is_file()
+    assert not [n for n in os.listdir(tmp_path) if n.startswith(("~", "$"))]
+
+
+def test_tilde_in_the_pipelines_cache_and_output_is_expanded(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    p = make_project(tmp_path, yaml_text=SYNTHETIC_YAML + "cache: ~/yc\noutput: ~/yo\n")
+    pipe = load_pipeline(str(p))
+    assert pipe.cache_dir == str(tmp_path / "home" / "yc") and pipe.output_dir == str(tmp_path / "home" / "yo")
+
+
+@pytest.mark.parametrize("option", ["--cache", "--out", "--summary-json"])
+def test_an_undefined_variable_in_a_path_option_is_refused(project, tmp_path, option):
+    r = cli(["run", str(project), "--workers", "0", option, "$NO_SUCH_VARIABLE_XYZ/x"], tmp_path)
+    assert r.returncode in (1, 2) and "Traceback" not in r.stderr, r.stderr
+    assert "$NO_SUCH_VARIABLE_XYZ" in r.stderr and "not set" in r.stderr, r.stderr
+    assert not [n for n in os.listdir(tmp_path) if n.startswith("$")]
+
+
+def test_an_undefined_variable_in_the_pipelines_cache_names_the_key(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    p = make_project(tmp_path, yaml_text=SYNTHETIC_YAML + "cache: $NO_SUCH_VARIABLE_XYZ/c\n")
+    with pytest.raises(PipelineError, match="NO_SUCH_VARIABLE_XYZ") as err:
+        load_pipeline(str(p))
+    assert err.value.key == "cache" and err.value.line

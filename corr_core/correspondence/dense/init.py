@@ -320,6 +320,10 @@ def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int = 2, point
     Ps = (cached_extremities(source) if points_source is None
           else source.to_local(points_source, what="template point"))
     Pt = extremities(target) if points_target is None else target.to_local(points_target, what="target point")
+    few = [f"the {what} has {len(P)}" for what, P in (("template", Ps), ("target", Pt)) if len(P) < 3]
+    if few:
+        raise ValueError(f"the automatic initialisation needs at least 3 feature points (extremities) on each mesh; "
+                         f"{' and '.join(few)} (a mesh this small or this round has no distinct extremities)")
     Gs, Gt = source.distances(Ps), target.distances(Pt)          # (p, n_s), (q, n_t), reused per candidate
     Ds, Dt = 0.5 * (Gs[:, Ps] + Gs[:, Ps].T), 0.5 * (Gt[:, Pt] + Gt[:, Pt].T)
     candidates = ranked_assignments(Ds, Dt, keep=keep, scale_invariant=True)

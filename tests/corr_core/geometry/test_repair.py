@@ -187,3 +187,35 @@ def test_vertex_ids_survive_junk_vertices_before_and_among_the_real_ones():
     np.testing.assert_array_equal(repaired, new_id[F])
     np.testing.assert_array_equal(V_junk[repaired], V[F])                             # same positions per corner
     assert _kinds(records)["unreferenced_vertices"]["count"] == 3
+
+
+@pytest.mark.parametrize("far", [1e30, -1e13])
+def test_a_used_vertex_out_of_range_is_named(far):
+    """A face using a vertex at 1e30 used to be reported as "no valid face left after removing degenerate and
+    zero-area faces" (the bounding box dwarfed every face); now the vertex is named."""
+    V = TET_V.copy()
+    V[2, 1] = far
+    with pytest.raises(MeshError, match=r"ball\.obj: vertex 2 \(0-based: vertex number 3 of the file\) is out of "
+                                        r"range") as err:
+        repair_mesh(V, TET_F, "ball.obj")
+    assert "no valid face" not in str(err.value)
+
+
+def test_an_unused_vertex_far_out_is_still_ignored():
+    V = np.vstack([TET_V, [[1e30, 0.0, 0.0]]])
+    F2, records = repair_mesh(V, TET_F, "ball.obj")
+    assert len(F2) == 4 and "unreferenced_vertices" in _kinds(records)
+
+
+def test_the_correspondence_stage_names_the_file_of_a_vertex_out_of_range(tmp_path):
+    from shapecorr.correspondence import mesh
+
+    V, F = sphere(200)
+    V = V.copy()
+    V[17] = [1e30, 0.0, 0.0]
+    path = tmp_path / "scans" / "body_03.obj"
+    path.parent.mkdir()
+    save_obj(path, V, F)
+    with pytest.raises(MeshError) as err:
+        mesh(str(path), item_name="body_03")
+    assert str(path) in str(err.value) and "vertex 17" in str(err.value) and "out of range" in str(err.value)
