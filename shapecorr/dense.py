@@ -11,7 +11,8 @@ evaluation); ``corr.dense_measures`` -- errors against the ground truth, where t
 Once: ``corr.place_landmarks`` (the template's landmarks placed on every target, published as files), and the
 summaries in ``corr.evaluate`` (``dense_reports``).
 
-Ground truth of a test mesh: vertex i <-> vertex i when it has the template's vertex count and triangles, else
+Ground truth of a test mesh: vertex i <-> vertex i when it has the template's triangles (its vertex count and
+order alone never decide: ``landmark_sources.numbered_like_template``), else
 ``ground_truth/<mesh>.txt`` (one target vertex id per template vertex, a line each), else none (maps and placed
 landmarks are still produced, without error numbers). Its true landmarks: ``landmarks/<mesh>.txt``, else the
 shared landmark file on a mesh numbered like the template, else the ground-truth map applied to the template's.
@@ -28,12 +29,11 @@ from corr_core.correspondence.dense import measures as dense_measures_lib
 from corr_core.correspondence.dense.basis import MeshBasis, map_to_original
 from corr_core.correspondence.landmarks import read_landmarks, write_landmarks
 from corr_core.geometry.intrinsic import IntrinsicMesh
-from corr_core.geometry.primitives import same_triangles
 from corr_core.geometry.sampling import farthest_point_samples
 
 from stages.registry import register
 
-from .landmark_sources import mesh_landmarks, sparse_positions
+from .landmark_sources import mesh_landmarks, numbered_like_template, sparse_positions
 
 METHODS = ("dense_sparse", "dense_auto")
 KIM_LABELS = {"mobius": "Möbius (best map)", "dense_sparse": "dense_sparse (5 points)",
@@ -144,12 +144,13 @@ def place_landmarks(template_mesh, landmarks, dense_sparse=None, dense_auto=None
 def _true_map(template_mesh: dict, target_mesh: dict, ground_truth, name: str) -> tuple[np.ndarray | None, str]:
     """(n_template,) int true target vertex of each template vertex and where it comes from, or (None, why)."""
     n_s, n_t = len(template_mesh["V"]), len(target_mesh["V"])
-    if n_s == n_t and same_triangles(np.asarray(target_mesh["F"]), np.asarray(template_mesh["F"])):
-        return np.arange(n_s), "identity"
+    problem = numbered_like_template(target_mesh, template_mesh)
+    if problem is None:     # the same triangles: vertex i <-> vertex i (-1 past the target's last vertex)
+        return np.where(np.arange(n_s) < n_t, np.arange(n_s), -1), "identity"
     path = os.path.join(ground_truth, f"{name}.txt") if ground_truth else ""
     if not os.path.isfile(path):
-        return None, (f"{name}: {n_t} vertices / other triangles than the template ({n_s}) and no "
-                      f"ground_truth/{name}.txt: no dense ground truth, errors not measured")
+        return None, (f"{name}: {problem}, and no ground_truth/{name}.txt: no dense ground truth, errors not "
+                      "measured")
     truth = np.loadtxt(path, dtype=np.int64, ndmin=1)
     if truth.shape != (n_s,) or truth.min() < 0 or truth.max() >= n_t:
         raise ValueError(f"{path}: must hold {n_s} target vertex ids (one per template vertex, a line each) in "
