@@ -56,3 +56,52 @@ def scalar_metrics(m: dict, prefix: str = "") -> dict[str, Any]:
         elif isinstance(v, str) and len(v) < 20:
             out[name] = v
     return out
+
+
+def _override(key: str, value: Any) -> str:
+    """A ``--set`` text for one parameter value (JSON is valid YAML, so lists, numbers and booleans round-trip)."""
+    import json
+
+    return f"{key}={value}" if isinstance(value, str) else f"{key}={json.dumps(value)}"
+
+
+def result(pipeline: str | Plan, stage: str, item: str | None = None, params: dict | None = None,
+           cache_dir: str | None = None) -> Any:
+    """The stored result of one task of ``stage``: its value as the stage function returned it (dicts, arrays,
+    numbers), read from the cache; runs nothing.
+
+    pipeline: a pipeline file (planned with ``params``: {key: value} like ``--set key=value``, and
+    ``cache_dir``), or a ``Plan``. item: the item name of a per-item stage (e.g. "mesh004"), the tile label of
+    a pairs stage, None for a once stage. Raises ``UserError`` naming the stage / item and what to do when the
+    stage or item is unknown or the task is not computed yet (with these params).
+
+        from stages import api
+        r = api.result("pipelines/scape.yaml", "dense_auto", "mesh004", params={"dense_auto.n_patches": 300})
+        r["vertex_map"]          # (n_template,) int: target vertex of each template vertex
+    """
+    from .errors import UserError
+    from .plan import plan_pipeline
+
+    plan = pipeline if isinstance(pipeline, Plan) else plan_pipeline(
+        pipeline, [_override(k, v) for k, v in (params or {}).items()], cache_dir=cache_dir)
+    if stage not in plan.stages:
+        raise UserError(f"no stage '{stage}' in the pipeline", fix=f"use one of: {', '.join(plan.stages)}")
+    sp = plan.stages[stage]
+    if sp.skipped is not None:
+        raise UserError(f"stage '{stage}' is skipped: {sp.skipped}", fix="give the input it needs")
+    labels = {t.label: t for t in sp.tasks}
+    if item is None and len(sp.tasks) == 1:
+        task = sp.tasks[0]
+    elif item in labels:
+        task = labels[item]
+    else:
+        shown = ", ".join(list(labels)[:10]) + (" ..." if len(labels) > 10 else "")
+        what = "is a per-item stage: name the item" if item is None else f"has no item '{item}'"
+        raise UserError(f"stage '{stage}' {what}" + (f" (its items: {shown})" if labels else " (no tasks planned "
+                        "yet: its input is generated or waited for by the run)"),
+                        fix="pass item= one of its items" if labels else "run the pipeline first")
+    if not plan.store.has(task.key):
+        where = f"{stage}[{item}]" if item is not None else stage
+        raise UserError(f"{where} is not computed with these params (cache {getattr(plan.store, 'root', '?')})",
+                        fix="run the pipeline with the same --set values first (python -m stages run ...)")
+    return plan.store.get(task.key)
