@@ -45,6 +45,7 @@ class InputRef:
     source: str
     item: str | None = None      # a specific item name
     whole: bool = False          # "SOURCE[*]": the whole collection even inside a foreach
+    item_param: str | None = None  # the parameter the item name came from ("SOURCE[${template}]": "template")
 
 
 @dataclass
@@ -621,8 +622,15 @@ def _read_stages(raw: dict, pipe: Pipeline, resolver: _Resolver, err) -> dict[st
             if arg not in fn.inputs:
                 raise err(f"function '{fname}' has no input '{arg}'", "stages", name, "inputs", arg,
                           fix=f"its inputs: {', '.join(fn.inputs) or '(none)'}")
+            param = re.fullmatch(r"\s*[\w.-]+\[\$\{([^}]+)\}\]\s*", ref) if isinstance(ref, str) else None
+            empty = _empty_references(ref, resolver, ("stages", name, "inputs", arg))
+            if empty:
+                raise err(f"input '{ref}' uses {', '.join('${' + r + '}' for r in empty)}, which is empty",
+                          "stages", name, "inputs", arg, fix=f"set it, e.g. --set {empty[0]}=NAME")
             ref = resolver.resolve(ref, ("stages", name, "inputs", arg))
             inputs[arg] = _parse_input(ref, err, ("stages", name, "inputs", arg))
+            if param:
+                inputs[arg].item_param = param.group(1).strip()
             if inputs[arg].source not in names:
                 raise err(f"unknown dataset or stage '{inputs[arg].source}'", "stages", name, "inputs", arg,
                           fix=_suggest(inputs[arg].source, names))

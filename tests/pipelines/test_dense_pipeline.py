@@ -20,6 +20,7 @@ from corr_core.geometry.mesh_io import load_mesh, save_obj
 from shapecorr.dense import _true_map
 from shapecorr.generators import _check_humanoid
 from stages import api
+from stages.errors import PipelineError
 
 from tests.helpers import ROOT
 
@@ -223,6 +224,54 @@ def test_shuffled_vertex_ids_give_the_same_scores(data, first_run, tmp_path, das
           f"{after_sparse:.5f}, accuracy {m['accuracy']['dense_sparse']:.3f}")
     assert "dense_skipped" not in m and m["accuracy"]["dense_sparse"] >= acc_before - 0.05
     assert abs(after_sparse - before_sparse) <= SHUFFLE_NOISE
+
+
+OWN = ROOT / "pipelines" / "own_meshes.yaml"
+OWN_COARSE = ["dense_basis.k=60", "dense_basis.n_samples=1000", "dense_auto_init.k_init=30",
+              "dense_auto_init.k_end=60", "dense_auto.n_patches=150", "dense_template.n_patches=150"]
+
+
+def test_own_meshes_in_one_command(data, first_run, tmp_path, dask_client):
+    """pipelines/own_meshes.yaml: a template with its landmark file and a folder of meshes with nothing else
+    (here one pose and one decimated with shuffled ids) -> dense maps and placed landmarks, near the truth."""
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    for sub, name in (("template", "mesh000"), ("test", "mesh001"), ("test", "mesh002")):
+        shutil.copy(data["root"] / "meshes" / sub / f"{name}.obj", folder)
+    sets = [f"data.root={folder}", "template=mesh000", f"landmarks={data['root'] / 'landmark_vids.txt'}",
+            *OWN_COARSE]
+    out = tmp_path / "out"
+    s = api.run(str(OWN), sets, client_getter=lambda: dask_client, quiet=True, cache_dir=str(data["cache"]),
+                output_dir=str(out))
+    assert not s["failures"]
+    ids, names = read_landmarks(data["root"] / "landmark_vids.txt")
+    truth = {"mesh001": np.arange(len(load_mesh(folder / "mesh000.obj")[0])),
+             "mesh002": np.loadtxt(data["root"] / "ground_truth" / "mesh002.txt", dtype=np.int64)}
+    for mesh, true_map in truth.items():
+        placed, placed_names = read_landmarks(out / "placed_landmarks" / "dense_auto" / f"{mesh}.txt")
+        assert placed_names == names
+        V, F = load_mesh(folder / f"{mesh}.obj")
+        _, nearest = dense_measures.landmark_errors(V, F, placed, true_map[ids])
+        assert dense_measures.landmark_accuracy(nearest) >= LANDMARK_ACCURACY_FLOOR, mesh
+        vm = read_dense_map(out / "dense_maps" / "dense_auto" / f"{mesh}.txt", n_template=len(true_map),
+                            n_target=len(V))
+        assert np.mean(vm == true_map) > 0.3, mesh
+        assert (out / "dense_maps" / "dense_auto" / f"{mesh}.ply").is_file()
+
+
+def test_own_meshes_missing_template_names_the_key_to_set(data, tmp_path):
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    shutil.copy(data["root"] / "meshes" / "test" / "mesh001.obj", folder)
+    base = [f"data.root={folder}", f"landmarks={data['root'] / 'landmark_vids.txt'}"]
+    with pytest.raises(PipelineError, match=r"uses \$\{template\}, which is empty\n  fix: set it, e.g. "
+                                            r"--set template=NAME"):
+        api.plan_pipeline(str(OWN), base, cache_dir=str(tmp_path / "c"))
+    with pytest.raises(PipelineError, match=r"'dense_basis' has no item 'body' \(parameter 'template'\)\n  fix: set it "
+                                            r"to one of the items with --set template=NAME; items: mesh001"):
+        api.plan_pipeline(str(OWN), base + ["template=body"], cache_dir=str(tmp_path / "c"))
+    with pytest.raises(PipelineError, match=r"'mesh' has no item 'mesh000' \(parameter 'template'\)"):
+        api.plan_pipeline(str(SCAPE), [f"data.root={tmp_path}"], cache_dir=str(tmp_path / "c"))
 
 
 def test_refinement_params_rerun_only_the_refinement_and_the_evaluation(data, first_run, dask_client):
