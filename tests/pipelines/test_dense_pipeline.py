@@ -270,8 +270,14 @@ def test_own_meshes_missing_template_names_the_key_to_set(data, tmp_path):
     with pytest.raises(PipelineError, match=r"'dense_basis' has no item 'body' \(parameter 'template'\)\n  fix: set it "
                                             r"to one of the items with --set template=NAME; items: mesh001"):
         api.plan_pipeline(str(OWN), base + ["template=body"], cache_dir=str(tmp_path / "c"))
-    with pytest.raises(PipelineError, match=r"'mesh' has no item 'mesh000' \(parameter 'template'\)"):
-        api.plan_pipeline(str(SCAPE), [f"data.root={tmp_path}"], cache_dir=str(tmp_path / "c"))
+    scape = tmp_path / "scape"                      # the course layout without the template mesh000
+    (scape / "meshes" / "test").mkdir(parents=True)
+    shutil.copy(data["root"] / "meshes" / "test" / "mesh001.obj", scape / "meshes" / "test")
+    for f in ("landmark_vids.txt", "sparse_landmark_vids.txt"):
+        shutil.copy(data["root"] / f, scape / f)
+    with pytest.raises(PipelineError, match=r"'mesh' has no item 'mesh000' \(parameter 'template'\)\n  fix: set it "
+                                            r"to one of the items with --set template=NAME"):
+        api.plan_pipeline(str(SCAPE), [f"data.root={scape}"], cache_dir=str(tmp_path / "c"))
 
 
 def test_refinement_params_rerun_only_the_refinement_and_the_evaluation(data, first_run, dask_client):
