@@ -289,7 +289,7 @@ def test_refinement_params_rerun_only_the_refinement_and_the_evaluation(data, fi
 
 def test_bad_ground_truth_file_fails_naming_it(tmp_path):
     template = {"V": np.zeros((5, 3)), "F": np.array([[0, 1, 2]])}
-    target = {"V": np.zeros((4, 3)), "F": np.array([[0, 1, 2]])}
+    target = {"V": np.zeros((4, 3)), "F": np.array([[1, 2, 3]])}     # other triangles: no vertex i <-> i
     (tmp_path / "scan.txt").write_text("1\n2\n3\n")
     with pytest.raises(ValueError, match="scan.txt: must hold 5 target vertex ids .* got 3 ids"):
         _true_map(template, target, str(tmp_path), "scan")
@@ -298,6 +298,9 @@ def test_bad_ground_truth_file_fails_naming_it(tmp_path):
         _true_map(template, target, str(tmp_path), "scan")
     truth, source = _true_map(template, target, str(tmp_path), "other")
     assert truth is None and "no ground_truth/other.txt" in source
+    same = {"V": np.zeros((4, 3)), "F": np.array([[2, 0, 1]])}         # the template's triangle, fewer unused
+    truth, source = _true_map(template, same, str(tmp_path), "scan")    # vertices: identity, whatever the file
+    assert source == "identity" and truth.tolist() == [0, 1, 2, 3, -1]
 
 
 def test_generator_params_are_checked():
