@@ -19,7 +19,7 @@ from corr_core.correspondence import matchers, measures, mesh_features
 from corr_core.correspondence.landmarks import read_landmarks
 from corr_core.geometry import checks as meshcheck
 from corr_core.geometry.mesh_io import load_mesh
-from corr_core.geometry.primitives import mesh_edges, surface_area
+from corr_core.geometry.primitives import mesh_edges, surface_area, triangles_key
 from corr_core.geometry.repair import repair_mesh, warn_repairs
 
 from stages.registry import register
@@ -62,7 +62,7 @@ def spectral(mesh, landmarks, landmark_files=None, template_mesh=None, *, k: int
         return no_landmarks_result(mesh, source)
     out = mesh_features.spectral_features(mesh["V"], mesh["F"], ids, k=k, n_times=n_times, n_energies=n_energies,
                                           wks_variance=wks_variance)
-    return {**out, "n_vertices": len(mesh["V"]), "landmark_source": source}  # matchers: does the truth apply
+    return {**out, **_numbering(mesh), "landmark_source": source}  # matchers: does the truth apply
 
 
 @register("corr.geodesics", group="correspondence", fanout="item")
@@ -74,7 +74,7 @@ def geodesics(mesh, landmarks, landmark_files=None, template_mesh=None) -> dict:
     ids, source = mesh_landmarks(mesh, landmarks, landmark_files, template_mesh)
     if ids is None:
         return no_landmarks_result(mesh, source)
-    return {**mesh_features.geodesic_features(mesh["V"], mesh["F"], ids), "n_vertices": len(mesh["V"]),
+    return {**mesh_features.geodesic_features(mesh["V"], mesh["F"], ids), **_numbering(mesh),
             "landmark_source": source}
 
 
@@ -125,11 +125,22 @@ def flatten(mesh, path, landmarks, flattened=None, samples=None, landmark_files=
             "sample_source": "fps" if sample_vids is None else "given", "landmark_source": landmark_source}
 
 
-def _mark_truth(result: dict, n_template: int | None, n_target: int | None, own_landmarks: bool = False) -> dict:
-    """Add "no_truth" (why) to a matcher's result when the landmark truth does not apply to this test mesh
-    (a mesh with its own landmark file, named like the template's, has it whatever its vertex count)."""
-    problem = None if own_landmarks else measures.identity_truth_problem(n_template, n_target)
-    return {**result, "no_truth": problem} if problem else result
+def _numbering(mesh: dict) -> dict:
+    """What a per-mesh result keeps of the mesh's vertex numbering, for the matchers (``_mark_truth``)."""
+    return {"n_vertices": len(mesh["V"]), "n_faces": len(mesh["F"]), "triangles": triangles_key(mesh["F"])}
+
+
+def _mark_truth(result: dict, template: dict, target: dict) -> dict:
+    """Add "no_truth" (why) to a matcher's result when the landmark truth "landmark i <-> landmark i" does not
+    apply to this test mesh: its landmarks come from the shared file but its triangles are not the template's
+    (``measures.triangles_problem``). A mesh with its own landmark file, named like the template's, has it
+    whatever its numbering."""
+    if target.get("landmark_source") == "own":
+        return result
+    problem = measures.triangles_problem(template.get("triangles"), target.get("triangles"),
+                                         template.get("n_faces"), target.get("n_faces"),
+                                         template.get("n_vertices"), target.get("n_vertices"))
+    return {**result, "no_truth": f"{problem}; not scored"} if problem else result
 
 
 def _skipped_match(target: dict) -> dict | None:
@@ -149,8 +160,7 @@ def match_descriptor(template, target, landmarks, sparse_landmarks, *, descripto
         return _skipped_match(target)
     out = matchers.match_descriptors(template, target, sparse_positions(landmarks, sparse_landmarks),
                                      descriptor=descriptor, metric=metric)
-    return _mark_truth(out, template.get("n_vertices"), target.get("n_vertices"),
-                       target.get("landmark_source") == "own")
+    return _mark_truth(out, template, target)
 
 
 @register("corr.match_mrf", group="correspondence", fanout="item")
@@ -165,8 +175,7 @@ def match_mrf(template, target, landmarks, sparse_landmarks, *, sigma: float = 0
         return _skipped_match(target)
     out = matchers.match_geodesic_mrf(template, target, sparse_positions(landmarks, sparse_landmarks), sigma=sigma,
                                       orientation_test=orientation)
-    return _mark_truth(out, template.get("n_vertices"), target.get("n_vertices"),
-                       target.get("landmark_source") == "own")
+    return _mark_truth(out, template, target)
 
 
 @register("corr.match_mobius", group="correspondence", fanout="item")
@@ -188,7 +197,7 @@ def match_mobius(template, target, template_mesh, target_mesh, landmarks, sparse
     out = matchers.match_mobius(template, target, template_mesh, target_mesh,
                                 sparse_positions(landmarks, sparse_landmarks), K=K, metric=metric, K_scale=K_scale,
                                 power=power, top=top, dense_points=dense_points)
-    return _mark_truth(out, len(template_mesh["V"]), len(target_mesh["V"]), target.get("landmark_source") == "own")
+    return _mark_truth(out, _numbering(template_mesh), {**_numbering(target_mesh), **target})
 
 
 # (label, method input, prediction key) of each reported method, in report order

@@ -11,7 +11,8 @@ evaluation); ``corr.dense_measures`` -- errors against the ground truth, where t
 Once: ``corr.place_landmarks`` (the template's landmarks placed on every target, published as files), and the
 summaries in ``corr.evaluate`` (``dense_reports``).
 
-Ground truth of a test mesh: vertex i <-> vertex i when it has the template's vertex count and triangles, else
+Ground truth of a test mesh: vertex i <-> vertex i when it has the template's triangles (its vertex count and
+order alone never decide: ``landmark_sources.numbered_like_template``), else
 ``ground_truth/<mesh>.txt`` (one target vertex id per template vertex, a line each), else none (maps and placed
 landmarks are still produced, without error numbers). Its true landmarks: ``landmarks/<mesh>.txt``, else the
 shared landmark file on a mesh numbered like the template, else the ground-truth map applied to the template's.
@@ -28,12 +29,12 @@ from corr_core.correspondence.dense import measures as dense_measures_lib
 from corr_core.correspondence.dense.basis import MeshBasis, map_to_original
 from corr_core.correspondence.landmarks import read_landmarks, write_landmarks
 from corr_core.geometry.intrinsic import IntrinsicMesh
-from corr_core.geometry.primitives import same_triangles
+from corr_core.geometry.mesh_io import save_ply
 from corr_core.geometry.sampling import farthest_point_samples
 
 from stages.registry import register
 
-from .landmark_sources import mesh_landmarks, sparse_positions
+from .landmark_sources import mesh_landmarks, numbered_like_template, sparse_positions
 
 METHODS = ("dense_sparse", "dense_auto")
 KIM_LABELS = {"mobius": "Möbius (best map)", "dense_sparse": "dense_sparse (5 points)",
@@ -151,15 +152,66 @@ def place_landmarks(template_mesh, landmarks, dense_sparse=None, dense_auto=None
     return {"placed": placed, "names": list(names), "files": files}
 
 
+DENSE_MAP_METHODS = ("mobius",) + METHODS
+
+
+@register("corr.export_dense_maps", group="correspondence", fanout="once", writes_files=True)
+def export_dense_maps(template_mesh, meshes, mobius=None, dense_sparse=None, dense_auto=None, *, colors: bool = True,
+                      out_dir: str) -> dict:
+    """Every dense map as a file, for use outside the project. Per method and target mesh:
+    ``<method>/<mesh>.txt`` -- ``#`` header lines naming the template, the target and the method, then one line
+    per template vertex i: its target vertex id (0-based, in the target file's vertex order; -1 off the
+    template's kept component); ``corr_core.correspondence.dense.read_dense_map`` (or ``numpy.loadtxt``) reads
+    it. With ``colors``, also ``<method>/<mesh>.ply``: the target mesh (its kept faces) with the template's
+    coordinates as RGB pulled back through the map as vertex colours (same colour = corresponding point;
+    opens in MeshLab or Blender), and ``template.ply``: the template coloured by its coordinates.
+
+    meshes: {name: corr.mesh result}; method inputs: {test mesh: result with "vertex_map"} (skipped meshes,
+    without a map, are left out). Returns {"files": [relative paths], "maps": {method: [meshes]}}.
+    """
+    Vs, Fs = np.asarray(template_mesh["V"]), np.asarray(template_mesh["F"])
+    template = os.path.splitext(template_mesh.get("name") or "template")[0]
+    files, written = [], {}
+    palette = None
+    if colors:
+        kept = np.unique(Fs)
+        palette = np.zeros_like(Vs, dtype=np.float64)
+        palette[kept] = plotting.meshes.coordinate_colors(Vs[kept])
+        save_ply(os.path.join(out_dir, "template.ply"), Vs, Fs, palette,
+                 comments=[f"template {template}: its coordinates as RGB (compare the <method>/<mesh>.ply files)"])
+        files.append("template.ply")
+    inputs = {"mobius": mobius, "dense_sparse": dense_sparse, "dense_auto": dense_auto}
+    for method, maps in _given_maps(inputs).items():
+        os.makedirs(os.path.join(out_dir, method), exist_ok=True)
+        for m, vm in maps.items():
+            target = meshes[m]
+            header = [f"dense map: template {template} ({len(Vs)} vertices) -> target {m} "
+                      f"({target.get('name', m)}, {len(target['V'])} vertices), method {method}",
+                      "line i (after these comments): target vertex id (0-based) of template vertex i; "
+                      "-1: no image (off the template's kept component)"]
+            with open(os.path.join(out_dir, method, f"{m}.txt"), "w", encoding="utf-8") as fh:
+                fh.write(dense.format_dense_map(vm, header))
+            files.append(f"{method}/{m}.txt")
+            if colors:
+                Vt = np.asarray(target["V"])
+                save_ply(os.path.join(out_dir, method, f"{m}.ply"), Vt, np.asarray(target["F"]),
+                         plotting.meshes.pull_back_colors(palette, vm, Vt),
+                         comments=[f"target {m} coloured by template {template}'s coordinates through {method}"])
+                files.append(f"{method}/{m}.ply")
+            written.setdefault(method, []).append(m)
+    return {"files": files, "maps": written}
+
+
 def _true_map(template_mesh: dict, target_mesh: dict, ground_truth, name: str) -> tuple[np.ndarray | None, str]:
     """(n_template,) int true target vertex of each template vertex and where it comes from, or (None, why)."""
     n_s, n_t = len(template_mesh["V"]), len(target_mesh["V"])
-    if n_s == n_t and same_triangles(np.asarray(target_mesh["F"]), np.asarray(template_mesh["F"])):
-        return np.arange(n_s), "identity"
+    problem = numbered_like_template(target_mesh, template_mesh)
+    if problem is None:     # the same triangles: vertex i <-> vertex i (-1 past the target's last vertex)
+        return np.where(np.arange(n_s) < n_t, np.arange(n_s), -1), "identity"
     path = os.path.join(ground_truth, f"{name}.txt") if ground_truth else ""
     if not os.path.isfile(path):
-        return None, (f"{name}: {n_t} vertices / other triangles than the template ({n_s}) and no "
-                      f"ground_truth/{name}.txt: no dense ground truth, errors not measured")
+        return None, (f"{name}: {problem}, and no ground_truth/{name}.txt: no dense ground truth, errors not "
+                      "measured")
     truth = np.loadtxt(path, dtype=np.int64, ndmin=1)
     if truth.shape != (n_s,) or truth.min() < 0 or truth.max() >= n_t:
         raise ValueError(f"{path}: must hold {n_s} target vertex ids (one per template vertex, a line each) in "

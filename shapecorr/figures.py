@@ -14,10 +14,11 @@ import numpy as np
 
 from corr_core.alignment.azimuth import agreement_up_to_offset
 from corr_core.correspondence.landmarks import read_landmarks
-from corr_core.correspondence.measures import identity_euclidean_error
 from corr_core.plotting import meshes as mesh_plots
 
 from stages.registry import register
+
+from .landmark_sources import mesh_landmarks
 
 VIEWS = (0, 1)         # front and three-quarter cameras of 8 around the y axis
 
@@ -26,13 +27,12 @@ def _mesh_pair(mesh: dict) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(mesh["V"]), np.asarray(mesh["F"])
 
 
-def _landmark_methods(inputs: dict, meshes: dict, n_template: int) -> dict:
-    """{method: {test mesh: (L,) predictions}} of the given method inputs, test meshes with a truth and the
-    template's vertex numbering only (the landmarks are drawn at the template's landmark ids)."""
+def _landmark_methods(inputs: dict) -> dict:
+    """{method: {test mesh: (L,) predictions}} of the given method inputs, test meshes with a truth only."""
     out = {}
     for method, results in inputs.items():
         preds = {m: np.asarray(r["all"]) for m, r in sorted((results or {}).items())
-                 if "no_truth" not in r and len(meshes[m]["V"]) == n_template}
+                 if "no_truth" not in r and "all" in r}
         if preds:
             out[method] = preds
     return out
@@ -40,21 +40,28 @@ def _landmark_methods(inputs: dict, meshes: dict, n_template: int) -> dict:
 
 @register("corr.landmark_figures", group="correspondence", fanout="once", writes_files=True)
 def landmark_figures(template_mesh, meshes, landmarks, descriptor=None, mrf=None, mrf_oriented=None,
-                     mobius_votes=None, *, out_dir: str) -> dict:
+                     mobius_votes=None, landmark_files=None, *, out_dir: str) -> dict:
     """Per landmark method: the template and up to 4 test poses (best .. worst by accuracy) side by side, from
     two cameras, with the predicted landmarks as numbered dots (green right, red x wrong; the truth is
-    landmark i -> landmark i). Files: ``landmarks_<method>.png``, and ``landmarks_worst_per_method.png`` (the
-    template and each method's worst pose, front camera).
+    landmark i -> landmark i). Each pose's landmarks are drawn where its own landmarks are
+    (``mesh_landmarks``: its file landmarks/<mesh>.txt, or the shared file on a mesh with the template's
+    triangles); a pose with neither is left out. Files: ``landmarks_<method>.png``, and
+    ``landmarks_worst_per_method.png`` (the template and each method's worst pose, front camera).
 
     meshes: {name: corr.mesh result}; method inputs: {test mesh: {"all": (L,) predicted landmark index}}.
     Returns {"figures": [file names], "poses": {method: [pose names shown, best first]}}.
     """
     ids, names = read_landmarks(landmarks, n_vertices=len(template_mesh["V"]))
     methods = _landmark_methods({"descriptor": descriptor, "mrf": mrf, "mrf_oriented": mrf_oriented,
-                                 "mobius": mobius_votes}, meshes, len(template_mesh["V"]))
+                                 "mobius": mobius_votes})
+    vids = {m: mesh_landmarks(meshes[m], landmarks, landmark_files, template_mesh)[0]
+            for m in sorted({m for p in methods.values() for m in p})}
+    methods = {k: {m: p for m, p in preds.items() if vids[m] is not None} for k, preds in methods.items()}
+    methods = {k: preds for k, preds in methods.items() if preds}
     figures, shown = mesh_plots.plot_landmark_methods(
         _mesh_pair(template_mesh), {m: _mesh_pair(meshes[m]) for p in methods.values() for m in p},
-        np.asarray(ids, np.int64), list(names), methods, out_dir, views=VIEWS)
+        {"template": np.asarray(ids, np.int64), **{m: v for m, v in vids.items() if v is not None}},
+        list(names), methods, out_dir, views=VIEWS)
     return {"figures": figures, "poses": shown}
 
 
@@ -65,21 +72,31 @@ def _vertex_maps(results) -> dict:
             for m, r in sorted((results or {}).items()) if not isinstance(r, dict) or "vertex_map" in r}
 
 
+def _mean_errors(maps: dict, dense_measures) -> dict:
+    """{method: {pose: mean error or None}}: the mean of ``corr.dense_measures``' errors of the pose (geodesic on
+    the target / sqrt(its area), against the true map: the measure of the results' "dense" table); None
+    without a true map."""
+    per_pose = dense_measures or {}
+    return {method: {m: (float(np.mean(per_pose[m]["errors"][method]))
+                         if method in per_pose.get(m, {}).get("errors", {}) else None) for m in mm}
+            for method, mm in maps.items()}
+
+
 @register("corr.dense_figures", group="correspondence", fanout="once", writes_files=True)
-def dense_figures(template_mesh, meshes, mobius=None, dense_sparse=None, dense_auto=None, *,
+def dense_figures(template_mesh, meshes, mobius=None, dense_sparse=None, dense_auto=None, dense_measures=None, *,
                   out_dir: str) -> dict:
     """Per dense method: the template coloured by its coordinates (as RGB) and up to 4 test poses coloured by
-    that function pulled back through the method's map (best .. worst by the mean Euclidean error against
-    vertex i <-> vertex i, when that truth exists). Files: ``dense_<method>.png``.
+    that function pulled back through the method's map (best .. worst by the pose's mean error from
+    ``dense_measures``: geodesic on the target / sqrt(area) against the true map, as in the results' "dense"
+    table; poses without a true map come last, uncaptioned). Files: ``dense_<method>.png``.
 
-    meshes: {name: corr.mesh result}; each method input: {test mesh: (n_template,) int or {"vertex_map": ...}}.
-    Returns {"figures": [file names], "mean_error": {method: {pose: error / sqrt(area)}}}.
+    meshes: {name: corr.mesh result}; each method input: {test mesh: (n_template,) int or {"vertex_map": ...}};
+    dense_measures: {test mesh: corr.dense_measures result}.
+    Returns {"figures": [file names], "mean_error": {method: {pose: mean geodesic error}}}.
     """
     inputs = {"mobius": mobius, "dense_sparse": dense_sparse, "dense_auto": dense_auto}
     maps = {method: _vertex_maps(r) for method, r in inputs.items() if _vertex_maps(r)}
-    V_template = np.asarray(template_mesh["V"])
-    errors = {method: {m: identity_euclidean_error(V_template, *_mesh_pair(meshes[m]), vm) for m, vm in mm.items()}
-              for method, mm in maps.items()}
+    errors = _mean_errors(maps, dense_measures)
     figures = mesh_plots.plot_dense_methods(_mesh_pair(template_mesh),
                                             {m: _mesh_pair(meshes[m]) for mm in maps.values() for m in mm},
                                             maps, errors, out_dir, views=VIEWS)

@@ -8,6 +8,7 @@ import os
 import numpy as np
 
 from corr_core.correspondence.landmarks import read_landmarks, subset_positions
+from corr_core.correspondence.measures import numbering_problem
 from corr_core.geometry.intrinsic import IntrinsicMesh
 
 
@@ -54,27 +55,37 @@ def _ordered_like(path: str, mesh: dict, names: list[str]) -> np.ndarray:
                      "as 'vid,Name' (names as in the template's file)")
 
 
+def numbered_like_template(mesh: dict, template_mesh: dict | None) -> str | None:
+    """Why the template's vertex ids do not name the same points on ``mesh``, or None when they do: the
+    triangles of the kept components (``corr.mesh``'s "F": after repair, so vertices no face uses do not count)
+    are the same (``measures.numbering_problem``). A vertex count alone never decides. No template: None."""
+    if template_mesh is None:
+        return None
+    return numbering_problem(template_mesh["F"], mesh["F"], len(template_mesh["V"]), len(mesh["V"]))
+
+
 def mesh_landmarks(mesh: dict, landmarks: str, landmark_files=None, template_mesh: dict | None = None
                    ) -> tuple[np.ndarray | None, str]:
     """This mesh's landmark ids in the order of the shared file ``landmarks``, and where they come from.
 
     ``landmark_files/<mesh>.txt`` when present ("own"); else the shared file ("shared"), which names the
-    template's vertex ids and so applies to a mesh with the template's vertex count (the course layout); a mesh
-    with another count has none: (None, why). Ids are checked to lie on the mesh's kept component.
-    Returns: ((L,) int64 or None, "own" | "shared" | why).
+    template's vertex ids and so applies only to a mesh numbered like the template: the same triangles
+    (``numbered_like_template``; the course layout). Any other mesh, even one with the template's vertex count
+    (e.g. its vertices in another order), has none: (None, why). Without ``template_mesh`` the shared file is
+    taken as it is (the matchers then compare ``triangles_key``). Ids are checked to lie on the mesh's kept
+    component. Returns: ((L,) int64 or None, "own" | "shared" | why).
     """
     own = own_landmark_file(landmark_files, mesh.get("name", ""))
     if own:
         ids = _ordered_like(own, mesh, _landmarks(landmarks)[1])
         IntrinsicMesh(mesh["V"], mesh["F"]).to_sub(ids, what="landmark", source=f"{own} on {mesh.get('name')}")
         return ids, "own"
-    n, n_template = len(mesh["V"]), None if template_mesh is None else len(template_mesh["V"])
-    if n_template is None or n == n_template:
+    problem = numbered_like_template(mesh, template_mesh)
+    if problem is None:
         return _landmarks_on(mesh, landmarks), "shared"
     stem = os.path.splitext(mesh.get("name", "mesh"))[0]
-    return None, (f"no landmarks: {n} vertices vs the template's {n_template}, so "
-                  f"{os.path.basename(landmarks)} (the template's vertex ids) does not apply and "
-                  f"landmarks/{stem}.txt is not given; the methods that need landmarks on it skip it")
+    return None, (f"no landmarks on {stem}: {problem}; {os.path.basename(landmarks)} (the template's vertex ids) "
+                  f"does not apply and landmarks/{stem}.txt is not given")
 
 
 def no_landmarks_result(mesh: dict, why: str) -> dict:

@@ -255,8 +255,11 @@ def _dispatch(args) -> int:
             for stage, items in m.get("_left_out", {}).items():
                 print(f"{stage} left out {len(items)} failed item(s): "
                       + "; ".join(f"{x['item']}: {x['why']}" for x in items)[:500])
-            for k, v in api.scalar_metrics(m).items():
-                print(f"{k:<40} {v:.4g}" if isinstance(v, float) else f"{k:<40} {v}")
+            from .results import format_results, headline_first
+
+            pairs, n_headline = headline_first(plan, m)
+            if pairs:
+                print(format_results(pairs, n_headline))
         return 0 if "_not_computed" not in m else 3
     if args.command == "gc":
         res = api.gc(args.pipelines, args.cache, dry=args.dry_run, keep_sweeps=not args.no_keep_sweeps,

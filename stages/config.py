@@ -45,6 +45,7 @@ class InputRef:
     source: str
     item: str | None = None      # a specific item name
     whole: bool = False          # "SOURCE[*]": the whole collection even inside a foreach
+    item_param: str | None = None  # the parameter the item name came from ("SOURCE[${template}]": "template")
 
 
 @dataclass
@@ -318,6 +319,48 @@ def _read_text(path: str) -> str:
     return text
 
 
+def _settable_keys(raw: dict) -> dict[str, str]:
+    """Every key ``--set`` accepts in this pipeline -> where it acts: each pipeline parameter (dotted, e.g.
+    ``humans.root``) with the stages whose settings refer to it, and each stage function parameter
+    (``stage.param``)."""
+    out: dict[str, str] = {}
+
+    def leaves(node, prefix):
+        for k, v in node.items():
+            if isinstance(v, dict) and v:
+                yield from leaves(v, f"{prefix}{k}.")
+            else:
+                yield f"{prefix}{k}"
+
+    for name in leaves(raw.get("params") or {}, ""):
+        users = [s for s, spec in raw["stages"].items() if "${" + name + "}" in str(spec)]
+        out[name] = (f"pipeline parameter, used by stage{'s' if len(users) > 1 else ''} {', '.join(users)}"
+                     if users else "pipeline parameter, used by the datasets" if "${" + name + "}" in
+                     str(raw.get("datasets")) else "pipeline parameter")
+    for stage, spec in raw["stages"].items():
+        fn = spec.get("function") if isinstance(spec, dict) else None
+        try:
+            params = registry.get(fn).params if fn else {}
+        except KeyError:
+            params = {}
+        for p in list(params) + [p for p in (spec.get("params") or {}) if p not in params]:
+            out[f"{stage}.{p}"] = f"parameter of stage '{stage}' ({fn})"
+    return out
+
+
+def _suggest_key(key: str, raw: dict, fallback: str = "") -> str:
+    """The closest keys ``--set`` accepts to ``key``, each with the stage it acts on: the keys ending in the
+    same parameter name first (``solve.sigma_scale`` -> ``align.sigma_scale``), then the closest spellings."""
+    keys = _settable_keys(raw)
+    last = key.rsplit(".", 1)[-1]
+    same_name = [k for k in keys if k.rsplit(".", 1)[-1] == last and k != key]
+    close = difflib.get_close_matches(key, list(keys), n=4, cutoff=0.6)
+    picked = list(dict.fromkeys(same_name + close))[:5]
+    if not picked:
+        return fallback or _suggest(key, keys)
+    return "did you mean " + "; ".join(f"{k} ({keys[k]})" for k in picked) + "?"
+
+
 def _apply_overrides(raw: dict, overrides, path, err) -> None:
     for ov in overrides:
         if "=" not in ov:
@@ -337,7 +380,7 @@ def _apply_overrides(raw: dict, overrides, path, err) -> None:
                 known = {}
             if parts[1] not in known and parts[1] not in stage["params"]:
                 raise PipelineError(f"--set {key}: stage '{parts[0]}' has no parameter '{parts[1]}'", file=path,
-                                    key=key, fix=_suggest(parts[1], list(known) or stage["params"]))
+                                    key=key, fix=_suggest_key(key.strip(), raw))
             stage["params"][parts[1]] = value
             continue
         if parts[0] == "params":
@@ -349,7 +392,7 @@ def _apply_overrides(raw: dict, overrides, path, err) -> None:
                 if i == 0:
                     opts += [f"{s}.<param>" for s in raw["stages"]]
                 raise PipelineError(f"--set {key}: unknown parameter '{'.'.join(parts[:i + 1])}'", file=path,
-                                    key=key, fix=_suggest(p, opts))
+                                    key=key, fix=_suggest_key(key.strip(), raw, _suggest(p, opts)))
             if i == len(parts) - 1:
                 node[p] = value
             else:
@@ -619,8 +662,15 @@ def _read_stages(raw: dict, pipe: Pipeline, resolver: _Resolver, err) -> dict[st
             if arg not in fn.inputs:
                 raise err(f"function '{fname}' has no input '{arg}'", "stages", name, "inputs", arg,
                           fix=f"its inputs: {', '.join(fn.inputs) or '(none)'}")
+            param = re.fullmatch(r"\s*[\w.-]+\[\$\{([^}]+)\}\]\s*", ref) if isinstance(ref, str) else None
+            empty = _empty_references(ref, resolver, ("stages", name, "inputs", arg))
+            if empty:
+                raise err(f"input '{ref}' uses {', '.join('${' + r + '}' for r in empty)}, which is empty",
+                          "stages", name, "inputs", arg, fix=f"set it, e.g. --set {empty[0]}=NAME")
             ref = resolver.resolve(ref, ("stages", name, "inputs", arg))
             inputs[arg] = _parse_input(ref, err, ("stages", name, "inputs", arg))
+            if param:
+                inputs[arg].item_param = param.group(1).strip()
             if inputs[arg].source not in names:
                 raise err(f"unknown dataset or stage '{inputs[arg].source}'", "stages", name, "inputs", arg,
                           fix=_suggest(inputs[arg].source, names))

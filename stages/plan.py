@@ -335,8 +335,13 @@ def _resolve_input(stage: StageSpec, arg: str, ref: InputRef, sources: dict[str,
         return src.pairs
     if ref.item is not None:
         if ref.item not in src.items:
+            items = f"{', '.join(list(src.items)[:10])}{' ...' if len(src.items) > 10 else ''}"
+            if ref.item_param:      # the item name comes from a parameter: name the key to set
+                raise PipelineError(f"'{ref.source}' has no item '{ref.item}' (parameter '{ref.item_param}')",
+                                    file=pipe.file, key=where,
+                                    fix=f"set it to one of the items with --set {ref.item_param}=NAME; items: {items}")
             raise PipelineError(f"'{ref.source}' has no item '{ref.item}'", file=pipe.file, key=where,
-                                fix=f"items: {', '.join(list(src.items)[:10])}{' ...' if len(src.items) > 10 else ''}")
+                                fix=f"items: {items}")
         return src.items[ref.item]
     if item is not None and not ref.whole:
         if item not in src.items:

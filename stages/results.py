@@ -56,3 +56,77 @@ def scalar_metrics(m: dict, prefix: str = "") -> dict[str, Any]:
         elif isinstance(v, str) and len(v) < 20:
             out[name] = v
     return out
+
+
+def headline_first(plan: Plan, m: dict) -> tuple[list[tuple[str, Any]], int]:
+    """``scalar_metrics(m)`` as (key, value) pairs: the keys the plugins' headline tables read first, in the
+    tables' order (table by table, row by row, measure by measure: the report's summary), then the others in
+    their stored order; and how many are headline keys."""
+    from .report.headline import key_directions
+
+    flat = scalar_metrics(m)
+    head = [k for k in key_directions(plan, m) if k in flat]
+    return [(k, flat[k]) for k in head] + [(k, v) for k, v in flat.items() if k not in set(head)], len(head)
+
+
+def format_results(pairs: list[tuple[str, Any]], n_headline: int | None = None) -> str:
+    """One ``key value`` line per metric (floats to 4 significant digits); a key holding a space is quoted
+    (JSON string), so each line stays two fields; a blank line after the first ``n_headline`` lines."""
+    import json
+
+    lines = []
+    for i, (k, v) in enumerate(pairs):
+        if n_headline and i == n_headline:
+            lines.append("")
+        key = json.dumps(k, ensure_ascii=False) if any(c.isspace() for c in k) else k
+        lines.append(f"{key:<40} {v:.4g}" if isinstance(v, float) else f"{key:<40} {v}")
+    return "\n".join(lines)
+
+
+def _override(key: str, value: Any) -> str:
+    """A ``--set`` text for one parameter value (JSON is valid YAML, so lists, numbers and booleans round-trip)."""
+    import json
+
+    return f"{key}={value}" if isinstance(value, str) else f"{key}={json.dumps(value)}"
+
+
+def result(pipeline: str | Plan, stage: str, item: str | None = None, params: dict | None = None,
+           cache_dir: str | None = None) -> Any:
+    """The stored result of one task of ``stage``: its value as the stage function returned it (dicts, arrays,
+    numbers), read from the cache; runs nothing.
+
+    pipeline: a pipeline file (planned with ``params``: {key: value} like ``--set key=value``, and
+    ``cache_dir``), or a ``Plan``. item: the item name of a per-item stage (e.g. "mesh004"), the tile label of
+    a pairs stage, None for a once stage. Raises ``UserError`` naming the stage / item and what to do when the
+    stage or item is unknown or the task is not computed yet (with these params).
+
+        from stages import api
+        r = api.result("pipelines/scape.yaml", "dense_auto", "mesh004", params={"dense_auto.n_patches": 300})
+        r["vertex_map"]          # (n_template,) int: target vertex of each template vertex
+    """
+    from .errors import UserError
+    from .plan import plan_pipeline
+
+    plan = pipeline if isinstance(pipeline, Plan) else plan_pipeline(
+        pipeline, [_override(k, v) for k, v in (params or {}).items()], cache_dir=cache_dir)
+    if stage not in plan.stages:
+        raise UserError(f"no stage '{stage}' in the pipeline", fix=f"use one of: {', '.join(plan.stages)}")
+    sp = plan.stages[stage]
+    if sp.skipped is not None:
+        raise UserError(f"stage '{stage}' is skipped: {sp.skipped}", fix="give the input it needs")
+    labels = {t.label: t for t in sp.tasks}
+    if item is None and len(sp.tasks) == 1:
+        task = sp.tasks[0]
+    elif item in labels:
+        task = labels[item]
+    else:
+        shown = ", ".join(list(labels)[:10]) + (" ..." if len(labels) > 10 else "")
+        what = "is a per-item stage: name the item" if item is None else f"has no item '{item}'"
+        raise UserError(f"stage '{stage}' {what}" + (f" (its items: {shown})" if labels else " (no tasks planned "
+                        "yet: its input is generated or waited for by the run)"),
+                        fix="pass item= one of its items" if labels else "run the pipeline first")
+    if not plan.store.has(task.key):
+        where = f"{stage}[{item}]" if item is not None else stage
+        raise UserError(f"{where} is not computed with these params (cache {getattr(plan.store, 'root', '?')})",
+                        fix="run the pipeline with the same --set values first (python -m stages run ...)")
+    return plan.store.get(task.key)

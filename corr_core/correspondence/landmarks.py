@@ -1,4 +1,4 @@
-"""Reading and writing landmark vertex-id files (``vid,Name`` lines or bare ids), with 1-based file detection."""
+"""Reading and writing landmark vertex-id files (``vid,Name`` lines or bare ids; 1-based only when declared)."""
 from __future__ import annotations
 
 import os
@@ -7,46 +7,72 @@ import warnings
 import numpy as np
 
 
-def _check_unique(path: str, ids: list[int], line_nos: list[int]) -> None:
-    """Raise ValueError naming the file and both lines when a vertex id appears twice."""
+def _check_unique(path: str, ids: list[int], line_nos: list[int], names: list[str | None]) -> None:
+    """Raise ValueError naming the file and both lines when a vertex id, or a landmark name, appears twice."""
     first_line: dict[int, int] = {}
     for vid, line_no in zip(ids, line_nos):
         if vid in first_line:
             raise ValueError(f"{path}:{line_no}: vertex id {vid} is listed twice (first on line "
                              f"{first_line[vid]}); each landmark must be a different vertex: remove or fix one")
         first_line[vid] = line_no
+    first_name: dict[str, int] = {}
+    for name, line_no in zip(names, line_nos):
+        if name is None:
+            continue
+        if name in first_name:
+            raise ValueError(f"{path}:{line_no}: landmark name {name!r} is listed twice (lines {first_name[name]} "
+                             f"and {line_no}); each landmark needs its own name: rename or remove one")
+        first_name[name] = line_no
 
 
-def read_landmarks(path: str | os.PathLike, n_vertices: int | None = None) -> tuple[np.ndarray, list[str]]:
+ONE_BASED_HEADERS = ("# 1-based", "# one-based")
+
+
+def _declared_one_based(line: str) -> bool:
+    """True for a header comment declaring 1-based ids (``# 1-based`` / ``# one-based``, any case)."""
+    return line.lower().replace(" ", "") in {h.replace(" ", "") for h in ONE_BASED_HEADERS}
+
+
+def read_landmarks(path: str | os.PathLike, n_vertices: int | None = None,
+                   one_based: bool | str = False) -> tuple[np.ndarray, list[str]]:
     """Read landmark vertex ids and names.
 
     Each non-empty line is ``vid,Name`` or a bare integer ``vid`` (then the name is ``str(vid)`` of the
-    0-based id). The file's last line may lack a newline.
+    0-based id); lines starting with ``#`` are comments. The file's last line may lack a newline.
 
-    1-based files: when ``n_vertices`` is given, a file that contains the id ``n_vertices`` (one past the
-    last 0-based id) and no id 0 is taken to be 1-based; every id is decremented and a ``UserWarning`` is
-    issued. A file with both 0 and ``n_vertices`` is inconsistent and raises.
+    Ids are 0-based. A file is read as 1-based only when it says so (a comment line ``# 1-based`` before its
+    first id) or ``one_based`` does: True, or "auto" = 1-based exactly when every id fits 1..n_vertices, none
+    is 0 and one is n_vertices (past the last 0-based id; a ``UserWarning`` says so). Nothing is ever guessed
+    otherwise: an id out of range (e.g. a typo n_vertices in a 0-based file) is an error naming the file and
+    the line, never a reason to shift the other ids.
 
     Args:
         path: text file.
-        n_vertices: number of vertices of the mesh the ids refer to (enables range checks and 1-based
-            detection); None skips both except the non-negativity check.
+        n_vertices: number of vertices of the mesh the ids refer to (enables the range check); None skips it.
+        one_based: False (0-based unless the file's header says 1-based), True, or "auto" (see above).
     Returns:
         ids: (k,) int64 0-based vertex ids, in file order.
         names: list of k names.
     Raises:
-        ValueError: unparsable line, id out of range, or the same vertex id twice (two landmarks cannot be one
-        vertex: the truth "landmark i <-> landmark i" would be ambiguous); the message names the file and the
-        (1-based) lines.
+        ValueError: unparsable line, id out of range (id 0 in a 1-based file), the same vertex id twice (two
+        landmarks cannot be one vertex: the truth "landmark i <-> landmark i" would be ambiguous) or the same
+        name twice; the message names the file and the (1-based) lines.
     """
     path = os.fspath(path)
+    if one_based not in (False, True, "auto"):
+        raise ValueError(f"read_landmarks: one_based must be False, True or 'auto', got {one_based!r}")
     ids: list[int] = []
     names: list[str | None] = []
     line_nos: list[int] = []
+    header_line = None
     with open(path, "r", encoding="utf-8") as fh:
         for line_no, raw in enumerate(fh, start=1):
             line = raw.strip()
-            if not line or line.startswith("#"):
+            if not line:
+                continue
+            if line.startswith("#"):
+                if not ids and _declared_one_based(line):
+                    header_line = line_no
                 continue
             head, _, name = line.partition(",")
             try:
@@ -58,24 +84,34 @@ def read_landmarks(path: str | os.PathLike, n_vertices: int | None = None) -> tu
             ids.append(vid)
             names.append(name.strip() or None)
             line_nos.append(line_no)
-    _check_unique(path, ids, line_nos)
+    _check_unique(path, ids, line_nos, names)
     arr = np.asarray(ids, dtype=np.int64)
-    if n_vertices is not None and len(arr):
-        has_n, has_zero = bool(np.any(arr == n_vertices)), bool(np.any(arr == 0))
-        if has_n and has_zero:
-            bad = line_nos[int(np.flatnonzero(arr == n_vertices)[0])]
-            raise ValueError(
-                f"{path}:{bad}: id {n_vertices} is out of range 0..{n_vertices - 1}, and the file also holds id 0,"
-                " so it is not simply 1-based"
-            )
-        if has_n:
+    if header_line is not None:
+        one_based, why = True, f"its line {header_line} says 1-based"
+    else:
+        why = "one_based=True"
+    if one_based == "auto":
+        one_based = bool(n_vertices is not None and len(arr) and np.any(arr == n_vertices) and not np.any(arr == 0))
+        if one_based:
             warnings.warn(f"{path}: contains id {n_vertices} == number of vertices and no 0: "
-                          "treating the file as 1-based and subtracting 1", UserWarning, stacklevel=2)
-            arr = arr - 1
+                          "treating the file as 1-based and subtracting 1 (one_based='auto')", UserWarning,
+                          stacklevel=2)
+        why = "one_based='auto'"
+    if one_based and len(arr):
+        zero = np.flatnonzero(arr == 0)
+        if len(zero):
+            raise ValueError(f"{path}:{line_nos[int(zero[0])]}: vertex id 0 in a 1-based file ({why}); 1-based ids "
+                             "run from 1: fix the id, or remove the '# 1-based' line if the file is 0-based")
+        arr = arr - 1
+    if n_vertices is not None and len(arr):
         over = np.flatnonzero(arr >= n_vertices)
         if len(over):
             i = int(over[0])
-            raise ValueError(f"{path}:{line_nos[i]}: vertex id {ids[i]} is out of range 0..{n_vertices - 1}")
+            hint = (f"1-based ids run 1..{n_vertices}" if one_based else
+                    f"ids are 0-based, 0..{n_vertices - 1}; if the whole file is 1-based, put a line '# 1-based' "
+                    "above its first id")
+            raise ValueError(f"{path}:{line_nos[i]}: vertex id {ids[i]} is out of range for a mesh of {n_vertices} "
+                             f"vertices ({hint})")
     out_names = [nm if nm is not None else str(int(v)) for nm, v in zip(names, arr)]
     return arr, out_names
 

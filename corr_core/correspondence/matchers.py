@@ -18,9 +18,8 @@ import numpy as np
 from corr_core.correspondence import landmark_mrf, mobius, orientation
 from corr_core.correspondence.descriptors import descriptor_distance
 from corr_core.correspondence.matching import hungarian_match
-from corr_core.correspondence.measures import geodesic_errors
+from corr_core.correspondence.measures import geodesic_errors, numbering_problem
 from corr_core.geometry.midedge import vertex_to_edge
-from corr_core.geometry.primitives import same_triangles
 from corr_core.geometry.sampling import farthest_point_samples
 
 __all__ = ["descriptor_matrix", "match_descriptors", "match_geodesic_mrf", "mobius_inputs", "match_mobius",
@@ -153,10 +152,10 @@ def match_mobius(template_flat: dict, target_flat: dict, template_mesh: dict, ta
            "vertex_map": dense_vertex_map(maps[0], s["Z"], t["Z"], template_flat, target_flat,
                                           len(template_mesh["V"]), ext_metric)}
     Vs, Fs, Vt, Ft = template_mesh["V"], template_mesh["F"], target_mesh["V"], target_mesh["F"]
-    if len(Vt) != len(Vs) or not same_triangles(Ft, Fs):
-        out["dense_skipped"] = (f"{len(Vt)} vertices and {len(Ft)} faces vs the template's {len(Vs)} and {len(Fs)} "
-                                "(the same connectivity is required): no vertex i <-> vertex i ground truth, "
-                                "dense-map errors skipped")
+    problem = numbering_problem(Fs, Ft, len(Vs), len(Vt))
+    if problem:
+        out["dense_skipped"] = (f"{problem} (the same triangles are required): no vertex i <-> vertex i ground "
+                                "truth, dense-map errors skipped")
     elif dense_points > 0:
         out["dense_errors"] = dense_map_errors(maps[0], template_flat, target_flat, Vs, Vt, Ft, dense_points,
                                                ext_metric)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from corr_core.geometry.geodesic import GeodesicSolver
-from corr_core.geometry.primitives import surface_area
+from corr_core.geometry.primitives import same_triangles, surface_area
 
 
 def correspondence_matrix(pred: np.ndarray, n_labels: int) -> np.ndarray:
@@ -113,37 +113,40 @@ def dense_map_summary(errors: np.ndarray) -> dict:
             "n_points": int(errors.size)}
 
 
-def identity_truth_problem(n_template_vertices: int | None, n_target_vertices: int | None) -> str | None:
-    """Why "landmark i <-> landmark i" is no ground truth for a test mesh, or None when it is.
+def numbering_problem(template_F: np.ndarray, target_F: np.ndarray, n_template: int | None = None,
+                      n_target: int | None = None) -> str | None:
+    """Why vertex ids of the template do not name the same points on a target mesh, or None when they do.
 
-    One landmark file names vertex ids for the template and every test mesh; that only names the same points
-    when the meshes share their vertex numbering, so a test mesh with another vertex count has no ground truth
-    (scoring it would average a meaningless accuracy in). None counts are unknown: no objection.
+    Two meshes share their vertex numbering only when their triangles are the same (as vertex-id sets, in any
+    order; ``same_triangles``): a vertex count says nothing (a file re-exported by another tool often has the
+    same count in another order). Pass the faces of the kept component (``corr.mesh``'s "F"), so vertices no
+    face uses, e.g. appended by a repair, do not matter. n_template, n_target: vertex counts, for the message.
     """
-    if n_template_vertices is None or n_target_vertices is None or n_template_vertices == n_target_vertices:
+    if same_triangles(np.asarray(target_F), np.asarray(template_F)):
         return None
-    return (f"{n_target_vertices} vertices vs the template's {n_template_vertices}: the landmark vertex ids do not "
-            "name the same points on both meshes, so there is no ground truth; not scored")
+    return numbering_reason(len(template_F), len(target_F), n_template, n_target)
+
+
+def numbering_reason(m_template: int, m_target: int, n_template: int | None = None,
+                     n_target: int | None = None) -> str:
+    """The text of ``numbering_problem`` from face (m) and vertex (n) counts: the triangles differ."""
+    counts = (f"{n_target} vertices / {m_target} faces vs the template's {n_template} / {m_template}"
+              if n_template is not None and n_target is not None else
+              f"{m_target} faces vs the template's {m_template}")
+    same = n_template == n_target and m_template == m_target
+    return (f"its triangles are not the template's ({counts}{': same counts, another vertex order' if same else ''})"
+            ", so the template's vertex ids do not name the same points on it")
+
+
+def triangles_problem(template_key: str | None, target_key: str | None, m_template: int, m_target: int,
+                      n_template: int | None = None, n_target: int | None = None) -> str | None:
+    """``numbering_problem`` from two ``triangles_key`` texts (None: unknown, no objection)."""
+    if template_key is None or target_key is None or template_key == target_key:
+        return None
+    return numbering_reason(m_template, m_target, n_template, n_target)
 
 
 def scorable_results(results: dict) -> tuple[dict, dict[str, str]]:
     """Split per-mesh method results {mesh: {..., "no_truth": reason?}} into (scorable, {mesh: reason})."""
     skipped = {m: r["no_truth"] for m, r in sorted(results.items()) if r.get("no_truth")}
     return {m: r for m, r in results.items() if m not in skipped}, skipped
-
-
-def identity_euclidean_error(template_V: np.ndarray, target_V: np.ndarray, target_F: np.ndarray,
-                             vertex_map: np.ndarray) -> float | None:
-    """Mean Euclidean distance / sqrt(target area) between each template vertex's image and the same vertex id
-    on the target (the truth "vertex i <-> vertex i"), over template vertices with an image (``vertex_map`` >= 0).
-
-    template_V: (n,3); target_V: (n,3); target_F: (m,3); vertex_map: (n,) int. None when the vertex counts
-    differ (no such truth) or no vertex has an image.
-    """
-    target_V = np.asarray(target_V)
-    vertex_map = np.asarray(vertex_map, np.int64)
-    if len(target_V) != len(template_V) or not np.any(vertex_map >= 0):
-        return None
-    has = np.nonzero(vertex_map >= 0)[0]
-    dist = np.linalg.norm(target_V[vertex_map[has]] - target_V[has], axis=1)
-    return float(dist.mean() / np.sqrt(surface_area(target_V, target_F)))

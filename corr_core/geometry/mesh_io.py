@@ -257,3 +257,29 @@ def normalize_mesh(V: np.ndarray, center: str = "bbox", F: np.ndarray | None = N
         raise MeshError("cannot normalize a mesh whose vertices all coincide (or are not finite)")
     with np.errstate(invalid="ignore", over="ignore"):
         return (V - c) / r, c, r
+
+
+def save_ply(path: str | os.PathLike, V: np.ndarray, F: np.ndarray, colors: np.ndarray | None = None,
+             comments: tuple[str, ...] | list[str] = ()) -> None:
+    """Write ``V`` (n,3) float, ``F`` (m,3) int (0-based) and optional per-vertex ``colors`` (n,3) in [0, 1]
+    as an ASCII PLY file (vertex order preserved; colours as uchar red/green/blue, which MeshLab and Blender
+    show as vertex colours). ``comments``: header comment lines (no newlines)."""
+    V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
+    if colors is not None:
+        colors = np.asarray(colors, np.float64)
+        if colors.shape != V.shape:
+            raise ValueError(f"save_ply: colors must be (n_vertices, 3) = {V.shape}, got {colors.shape}")
+    head = ["ply", "format ascii 1.0", *(f"comment {c}" for c in comments), f"element vertex {len(V)}",
+            "property float x", "property float y", "property float z"]
+    if colors is not None:
+        head += ["property uchar red", "property uchar green", "property uchar blue"]
+    head += [f"element face {len(F)}", "property list uchar int vertex_indices", "end_header"]
+    if colors is None:
+        rows = [f"{x:.9g} {y:.9g} {z:.9g}" for x, y, z in V]
+    else:
+        rgb = np.clip(np.round(colors * 255), 0, 255).astype(np.int64)
+        rows = [f"{x:.9g} {y:.9g} {z:.9g} {r} {g} {b}" for (x, y, z), (r, g, b) in zip(V, rgb)]
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write("\n".join(head) + "\n")
+        fh.write("".join(r + "\n" for r in rows))
+        fh.write("".join(f"3 {a} {b} {c}\n" for a, b, c in F))

@@ -139,12 +139,25 @@ def largest_component(V: np.ndarray, F: np.ndarray, by: str = "area") -> tuple[n
     return V[kept], remap[F_keep], kept
 
 
+def _canonical_triangles(F: np.ndarray) -> np.ndarray:
+    """(m,3) int64: each triangle's vertex ids sorted, the rows sorted (the triangle set, order-free)."""
+    A = np.sort(np.asarray(F, dtype=np.int64).reshape(-1, 3), axis=1)
+    return A[np.lexsort(A.T[::-1])]
+
+
 def same_triangles(F_a: np.ndarray, F_b: np.ndarray) -> bool:
     """True when F_a: (m,3) and F_b: (m,3) hold the same triangles as vertex sets, in any order."""
-    if F_a.shape != F_b.shape:
+    if np.shape(F_a) != np.shape(F_b):
         return False
-    A, B = np.sort(F_a, axis=1), np.sort(F_b, axis=1)
-    return bool(np.array_equal(A[np.lexsort(A.T[::-1])], B[np.lexsort(B.T[::-1])]))
+    return bool(np.array_equal(_canonical_triangles(F_a), _canonical_triangles(F_b)))
+
+
+def triangles_key(F: np.ndarray) -> str:
+    """A short text equal for two face arrays exactly when ``same_triangles`` holds (sha256 of the sorted
+    triangle set): lets a per-mesh result say which numbering it is in without keeping its faces."""
+    import hashlib
+
+    return hashlib.sha256(np.ascontiguousarray(_canonical_triangles(F)).tobytes()).hexdigest()[:32]
 
 
 def rotation_about_y(angle_rad: float) -> np.ndarray:

@@ -461,18 +461,22 @@ def spread_best_to_worst(names_by_score: list[str], k: int = 4) -> list[str]:
     return [names_by_score[i] for i in idx]
 
 
-def plot_landmark_methods(template: tuple, meshes: dict, landmark_vids: np.ndarray, names: list[str],
+def plot_landmark_methods(template: tuple, meshes: dict, landmark_vids, names: list[str],
                           methods: dict, out_dir: str, views: tuple[int, ...] = (0, 1), max_poses: int = 4,
                           worst_file: str = "landmarks_worst_per_method.png") -> tuple[list[str], dict]:
     """Per landmark method, the template and up to ``max_poses`` test poses (best .. worst by accuracy) with the
     predicted landmarks as numbered dots (``landmarks_<method>.png``), and one picture of every method's worst pose
-    (``worst_file``, first camera only). The truth is landmark i -> landmark i, the same vertex ids on every mesh.
+    (``worst_file``, first camera only). The truth is landmark i -> landmark i.
 
     Args:
-        template: (V, F); meshes: {pose: (V, F)}; landmark_vids: (L,) int; names: (L,) landmark names.
+        template: (V, F); meshes: {pose: (V, F)}; names: (L,) landmark names.
+        landmark_vids: {"template": (L,) int, pose: (L,) int} each mesh's landmark vertices, or one (L,) int
+            array when every mesh has the template's vertex numbering.
         methods: {method: {pose: (L,) predicted landmark index}} (poses with a truth only).
     Returns (file names written, {method: [poses shown, best first]}).
     """
+    if not isinstance(landmark_vids, dict):
+        landmark_vids = {"template": landmark_vids, **{m: landmark_vids for p in methods.values() for m in p}}
     figures, shown = [], {}
     for method, preds in methods.items():
         accuracy = {m: float(np.mean(p == np.arange(len(p)))) for m, p in preds.items()}
@@ -480,7 +484,7 @@ def plot_landmark_methods(template: tuple, meshes: dict, landmark_vids: np.ndarr
         file = f"landmarks_{method}.png"
         mean = float(np.mean(list(accuracy.values())))
         plot_landmark_panels(template, {m: meshes[m] for m in poses},
-                             {"template": landmark_vids, **{m: landmark_vids for m in poses}},
+                             {"template": landmark_vids["template"], **{m: landmark_vids[m] for m in poses}},
                              {m: preds[m] for m in poses}, list(names),
                              f"{method}: landmarks on the best .. worst test poses (mean accuracy {mean:.2f})",
                              os.path.join(out_dir, file), views=views)
@@ -489,7 +493,8 @@ def plot_landmark_methods(template: tuple, meshes: dict, landmark_vids: np.ndarr
     if shown:
         worst = {f"{method}: {poses[-1]}": (method, poses[-1]) for method, poses in shown.items()}
         plot_landmark_panels(template, {k: meshes[pose] for k, (_, pose) in worst.items()},
-                             {"template": landmark_vids, **{k: landmark_vids for k in worst}},
+                             {"template": landmark_vids["template"],
+                              **{k: landmark_vids[pose] for k, (_, pose) in worst.items()}},
                              {k: methods[m][pose] for k, (m, pose) in worst.items()}, list(names),
                              "the worst test pose of each method", os.path.join(out_dir, worst_file),
                              views=views[:1], wrap=3)
@@ -513,7 +518,7 @@ def plot_dense_methods(template: tuple, meshes: dict, vertex_maps: dict, errors:
         err = errors.get(method, {})
         order = sorted(maps, key=lambda m: (err.get(m) is None, err.get(m) or 0.0, m))
         poses = spread_best_to_worst(order, max_poses)
-        captions = {m: f"mean error {err[m]:.3f}" for m in poses if err.get(m) is not None}
+        captions = {m: f"mean geodesic error {err[m]:.3f}" for m in poses if err.get(m) is not None}
         file = f"dense_{method}.png"
         plot_dense_panels(template, {m: meshes[m] for m in poses}, {m: maps[m] for m in poses}, captions,
                           f"{method}: template coordinates as RGB, pulled back through the dense map "

@@ -3,7 +3,10 @@ from __future__ import annotations
 
 import base64
 import json
+import os
 import shutil
+import subprocess
+import sys
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -50,6 +53,22 @@ def _readme_block_matches(results_text: str) -> None:
         assert printed.get(name) == value, f"README says {name} {value}, results print {printed.get(name)}"
 
 
+def readme_python_example(readme: str) -> tuple[str, str]:
+    """(code, printed) of the README's "From Python" example: its python block and the comment of its print."""
+    code = readme.split("**From Python**", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    printed = [line.split("#", 1)[1].strip() for line in code.splitlines() if line.startswith("print(")]
+    return code, printed[0]
+
+
+def _readme_python_example_runs(folder: Path) -> None:
+    """The README's api.result example, run in the folder of a default run, prints what the README says."""
+    code, printed = readme_python_example((ROOT / "README.md").read_text(encoding="utf-8"))
+    res = subprocess.run([sys.executable, "-c", code], cwd=folder, capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])})
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert res.stdout.strip() == printed
+
+
 def test_readme_block_parser_reads_metric_lines():
     text = "x\n```\n" + README_BLOCK_START + "a.b   1    # note\nc  0.5\n...\n```\nd 3\n"
     assert readme_results_lines(text) == [("a.b", "1"), ("c", "0.5")]
@@ -84,6 +103,8 @@ def test_default_pipeline_and_report(tmp_path):
               "align_figures/view_pairs_best_worst.png", "corr_metrics/dense_map_error_curve.png",
               "corr_metrics/frequency_mobius_all.png", "corr_metrics/correspondences.json"):
         assert (out / f).is_file(), f
+
+    _readme_python_example_runs(tmp_path)
 
     res = cli(["report", "pipeline.yaml"], cwd=tmp_path)
     assert res.returncode == 0, res.stderr

@@ -26,11 +26,12 @@ from corr_core.correspondence.dense.deform import refine_deform
 from corr_core.correspondence.dense.init import automatic_hypotheses, map_automatic, map_from_points
 from corr_core.correspondence.dense.refine import (DEFAULT_REFINE, map_distortion, refine_best, refine_extrinsic,
                                                    refine_geodesic, refine_map, refine_spectral, upsample_spectral)
-from corr_core.correspondence.dense.transfer import transfer_landmarks
+from corr_core.correspondence.dense.transfer import format_dense_map, read_dense_map, transfer_landmarks
 
 __all__ = ["MeshBasis", "mesh_basis", "map_to_original", "dense_map", "map_from_points", "map_automatic",
            "automatic_hypotheses", "upsample_spectral", "refine_extrinsic", "refine_geodesic", "refine_deform",
-           "refine_map", "refine_spectral", "refine_best", "map_distortion", "DEFAULT_REFINE", "transfer_landmarks"]
+           "refine_map", "refine_spectral", "refine_best", "map_distortion", "DEFAULT_REFINE", "transfer_landmarks",
+           "format_dense_map", "read_dense_map"]
 
 
 def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarray, F_target: np.ndarray,

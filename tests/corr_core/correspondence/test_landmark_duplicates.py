@@ -14,8 +14,16 @@ def test_duplicate_landmark_id_is_an_error(tmp_path, text, line, first):
         read_landmarks(path, n_vertices=1000)
 
 
-def test_distinct_ids_are_fine(tmp_path):
+def test_distinct_ids_and_names_are_fine(tmp_path):
     path = tmp_path / "landmark_vids.txt"
-    path.write_text("1,A\n2,B\n3,A\n")  # repeated names are allowed, repeated vertices are not
+    path.write_text("1,A\n2,B\n3,C\n")
     ids, names = read_landmarks(path)
-    assert ids.tolist() == [1, 2, 3] and names == ["A", "B", "A"]
+    assert ids.tolist() == [1, 2, 3] and names == ["A", "B", "C"]
+
+
+def test_duplicate_landmark_name_is_an_error_naming_it_and_its_lines(tmp_path):
+    """Issue 21 item 9: a repeated name used to surface later as "lacks the landmarks [...]" of another file."""
+    path = tmp_path / "landmark_vids.txt"
+    path.write_text("1,A\n2,B\n3,A\n")
+    with pytest.raises(ValueError, match=r"landmark_vids\.txt:3: landmark name 'A' is listed twice \(lines 1 and 3\)"):
+        read_landmarks(path)

@@ -1,4 +1,4 @@
-"""Landmark files: named and bare ids, 1-based detection, errors naming file and line; writing them back;
+"""Landmark files: named and bare ids, 1-based only when declared, errors naming file and line; writing them back;
 subset positions."""
 import warnings
 
@@ -21,16 +21,44 @@ def test_read_landmarks_named_and_bare(tmp_path):
     assert names == ["5", "0", "9"]
 
 
-def test_read_landmarks_detects_one_based(tmp_path):
+def test_read_landmarks_is_one_based_only_when_declared(tmp_path):
     p = tmp_path / "one_based.txt"
-    p.write_text("10\n3\n1\n")
-    with pytest.warns(UserWarning, match="1-based"):
-        ids, _ = read_landmarks(p, 10)
+    p.write_text("# 1-based\n10\n3\n1\n")
+    ids, _ = read_landmarks(p, 10)              # the header says so
     np.testing.assert_array_equal(ids, [9, 2, 0])
+    q = tmp_path / "undeclared.txt"
+    q.write_text("10\n3\n1\n")
+    with pytest.warns(UserWarning, match="1-based"):
+        ids, _ = read_landmarks(q, 10, one_based="auto")   # the parameter asks for the guess
+    np.testing.assert_array_equal(ids, [9, 2, 0])
+    np.testing.assert_array_equal(read_landmarks(q, 10, one_based=True)[0], [9, 2, 0])
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        ids, _ = read_landmarks(p)  # no vertex count: ids taken as they are
+        ids, _ = read_landmarks(q)  # no vertex count: ids taken as they are
     np.testing.assert_array_equal(ids, [10, 3, 1])
+    zero = tmp_path / "zero.txt"
+    zero.write_text("# one-based\n4\n0\n")
+    with pytest.raises(ValueError, match=r"zero.txt:3: vertex id 0 in a 1-based file"):
+        read_landmarks(zero, 10)
+
+
+def test_one_typo_id_equal_to_the_vertex_count_is_an_error_not_a_shift(tmp_path):
+    """Issue 21 item 3: a 0-based file with one id == n (a typo) used to be read as 1-based, every landmark
+    shifted by one with only a warning."""
+    p = tmp_path / "mesh001.txt"
+    p.write_text("5,Head\n3,Left Hand\n10,Right Hand\n7,Left Toe\n")
+    with pytest.raises(ValueError, match=r"mesh001.txt:3: vertex id 10 is out of range for a mesh of 10 vertices "
+                                         r"\(ids are 0-based, 0..9; if the whole file is 1-based, put a line "
+                                         r"'# 1-based'"):
+        read_landmarks(p, 10)
+
+
+def test_duplicate_landmark_names_are_named_with_their_lines(tmp_path):
+    """Issue 21 item 9: a name listed twice used to surface later as a missing name."""
+    p = tmp_path / "lm.txt"
+    p.write_text("1,Head\n2,Left Hand\n3,Head\n")
+    with pytest.raises(ValueError, match=r"lm.txt:3: landmark name 'Head' is listed twice \(lines 1 and 3\)"):
+        read_landmarks(p, 10)
 
 
 def test_read_landmarks_errors_name_file_and_line(tmp_path):
@@ -42,6 +70,8 @@ def test_read_landmarks_errors_name_file_and_line(tmp_path):
     q.write_text("0\n10\n")
     with pytest.raises(ValueError, match=r"mixed.txt:2"):
         read_landmarks(q, 10)
+    with pytest.raises(ValueError, match=r"mixed.txt:2: vertex id 10 is out of range"):
+        read_landmarks(q, 10, one_based="auto")   # 0 and n: not 1-based, so n is out of range
     r = tmp_path / "junk.txt"
     r.write_text("3\nhello\n")
     with pytest.raises(ValueError, match=r"junk.txt:2"):

@@ -60,7 +60,10 @@ def test_mobius_matching_with_dense_errors_and_skipped_dense_map():
     assert out["dense_errors"].shape == (30,) and np.median(out["dense_errors"]) < 0.05
     other = {**mesh, "F": F[::-1][:-1]}  # a face less: no vertex i <-> vertex i truth
     skipped = match_mobius(flat, flat, mesh, other, SPARSE, top=10, dense_points=30)
-    assert "dense_errors" not in skipped and "same connectivity" in skipped["dense_skipped"]
+    assert "dense_errors" not in skipped and "same triangles are required" in skipped["dense_skipped"]
+    appended = {**mesh, "V": np.concatenate([V, V[:2] + 3.0])}   # 2 unused vertices appended: same triangles
+    kept = match_mobius(flat, flat, mesh, appended, SPARSE, top=10, dense_points=30)
+    assert "dense_skipped" not in kept and kept["dense_errors"].shape == (30,)
 
 
 def test_mobius_vertex_map_of_a_surface_to_itself_and_with_stray_vertices():

@@ -66,18 +66,3 @@ def test_dense_map_summary_fractions():
     s = dense_map_summary(np.array([0.0, 0.04, 0.08, 0.2, 0.3]))
     assert s == {"within_0.05": 0.4, "within_0.10": 0.6, "within_0.25": 0.8, "mean_error": pytest.approx(0.124),
                  "n_points": 5}
-
-
-def test_identity_euclidean_error_ignores_vertices_without_an_image():
-    from corr_core.correspondence.measures import identity_euclidean_error
-    V, F = sphere(200)
-    assert identity_euclidean_error(V, V, F, np.arange(len(V))) == 0.0
-    shifted = np.roll(np.arange(len(V)), 1)
-    err = identity_euclidean_error(V, V, F, shifted)
-    assert err > 0
-    partial = shifted.copy()
-    partial[:100] = -1
-    expected = np.linalg.norm(V[shifted[100:]] - V[100:], axis=1).mean() / np.sqrt(4 * np.pi)
-    assert abs(identity_euclidean_error(V, V, F, partial) - expected) < 0.01 * expected
-    assert identity_euclidean_error(V, V[:-1], F[:10], np.arange(len(V))) is None
-    assert identity_euclidean_error(V, V, F, np.full(len(V), -1)) is None

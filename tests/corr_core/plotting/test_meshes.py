@@ -56,20 +56,34 @@ def test_figure_stages_write_pictures(tmp_path):
     from shapecorr import figures
     V, F = box_mesh()
     mesh = {"V": V, "F": F, "area": 1.0}
+    perm = np.random.default_rng(0).permutation(len(V))            # the same box, vertices in another order
+    shuffled = {"V": V[np.argsort(perm)], "F": perm[F], "area": 1.0, "name": "p4.obj"}
     lm = tmp_path / "landmarks.txt"
     lm.write_text("0,a\n7,b\n3,c\n")
     preds = {"p1": {"all": np.array([0, 1, 2])}, "p2": {"all": np.array([1, 0, 2])},
-             "p3": {"all": np.array([0, 1, 2]), "no_truth": "different vertex count"}}
-    out = figures.landmark_figures(mesh, {"t": mesh, "p1": mesh, "p2": mesh, "p3": mesh}, str(lm), mrf=preds,
-                                   out_dir=str(tmp_path))
+             "p3": {"all": np.array([0, 1, 2]), "no_truth": "different vertex count"},
+             "p4": {"all": np.array([0, 1, 2])}}
+    out = figures.landmark_figures(mesh, {"t": mesh, "p1": mesh, "p2": mesh, "p3": mesh, "p4": shuffled}, str(lm),
+                                   mrf=preds, out_dir=str(tmp_path))
     assert out["figures"] == ["landmarks_worst_per_method.png", "landmarks_mrf.png"]
-    assert out["poses"] == {"mrf": ["p1", "p2"]}        # best first, worst last; no truth: left out
+    # best first, worst last; no truth, or no landmarks of its own (p4: the template's ids name other points): out
+    assert out["poses"] == {"mrf": ["p1", "p2"]}
     assert all((tmp_path / f).stat().st_size > 1000 for f in out["figures"])
+    (tmp_path / "own").mkdir()
+    (tmp_path / "own" / "p4.txt").write_text("".join(f"{perm[v]},{n}\n" for v, n in ((0, "a"), (7, "b"), (3, "c"))))
+    out = figures.landmark_figures(mesh, {"t": mesh, "p1": mesh, "p4": shuffled}, str(lm),
+                                   mrf={k: preds[k] for k in ("p1", "p4")}, landmark_files=str(tmp_path / "own"),
+                                   out_dir=str(tmp_path))
+    assert out["poses"] == {"mrf": ["p1", "p4"]}                   # p4 drawn at its own landmarks
+    # the captions are the tables' measure: the mean of corr.dense_measures' errors of the pose
     dense = figures.dense_figures(mesh, {"p1": mesh, "p2": mesh},
                                   mobius={"p1": {"vertex_map": np.arange(8)}, "p2": np.roll(np.arange(8), 1)},
+                                  dense_measures={"p1": {"errors": {"mobius": np.zeros(5)}},
+                                                  "p2": {"errors": {"mobius": np.array([0.1, 0.3])}}},
                                   out_dir=str(tmp_path))
-    assert dense["figures"] == ["dense_mobius.png"] and dense["mean_error"]["mobius"]["p1"] == 0.0
-    assert dense["mean_error"]["mobius"]["p2"] > 0
+    assert dense["figures"] == ["dense_mobius.png"] and dense["mean_error"]["mobius"] == {"p1": 0.0, "p2": 0.2}
+    dense = figures.dense_figures(mesh, {"p1": mesh}, mobius={"p1": np.arange(8)}, out_dir=str(tmp_path))
+    assert dense["mean_error"] == {"mobius": {}}                   # no true map: no number
 
 
 def test_azimuth_figure(tmp_path):
