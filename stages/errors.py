@@ -23,11 +23,12 @@ class _ProjectOnly(logging.Filter):
 
     def filter(self, record: logging.LogRecord) -> bool:
         if self.packages is None:
+            from . import registry
             try:
-                from .registry import fingerprint_packages
-                self.packages = ("stages", "py.warnings", *fingerprint_packages())
-            except Exception:  # no plugin can be loaded: the engine and warnings only
-                return record.name.split(".")[0] in ("stages", "py")
+                registry.load_library()
+            except Exception:  # noqa: BLE001 - a plugin that cannot be loaded is reported where a stage needs it;
+                pass           # the messages of the plugins that did load still count
+            self.packages = ("stages", "py.warnings", *registry.fingerprint_packages())
         return any(record.name == p or record.name.startswith(p + ".") for p in self.packages)
 
 

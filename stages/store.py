@@ -303,7 +303,7 @@ _TMP_SUFFIX = r"(\.[0-9a-f]{32}\.tmp)?"   # a half-written file of atomic_write_
 _ENGINE_FILE = re.compile("^(?:" + "|".join([
     r"manifest/[0-9a-f]{2}/[0-9a-f]{32}\.json" + _TMP_SUFFIX,
     r"objects/[0-9a-f]{2}/[0-9a-f]{32}\.(?:zarr|files)/.+",
-    r"runs/[^/]+-[0-9a-f]{10}\.json" + _TMP_SUFFIX,
+    r"runs/[^/]+-[0-9a-f]{10}(?:\.keys)?\.json" + _TMP_SUFFIX,   # the last run, and the ledger of keys (record.py)
     r"sweeps/[^/]+-[0-9a-f]{10}-[0-9a-f]{8}\.json" + _TMP_SUFFIX,
     r"generated/[0-9a-f]{32}/.+",
     r"(?:filehash|fingerprints)\.json" + _TMP_SUFFIX]) + ")$")

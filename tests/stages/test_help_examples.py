@@ -38,12 +38,13 @@ def readme_commands() -> list[str]:
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     found = []
     for block in re.findall(r"```[a-z]*\n(.*?)```", text, flags=re.S):
+        block = re.sub(r"\\\n\s*", " ", block)        # a command continued on the next line
         for line in block.splitlines():
             for part in line.lstrip("$ ").split("&&"):
                 if part.strip().startswith(PREFIX + " "):
                     found.append(part.strip())
     prose = re.sub(r"```.*?```", "", text, flags=re.S)
-    found += [m.strip() for m in re.findall(r"`(python -m stages [^`]+)`", prose)]
+    found += [" ".join(m.split()) for m in re.findall(r"`(python -m stages [^`]+)`", prose)]   # may wrap
     return list(dict.fromkeys(found))
 
 
@@ -55,11 +56,22 @@ def _own_chairs(folder: Path) -> Path:
     return folder
 
 
-def _own_poses(folder: Path) -> Path:
-    """A copy of the course's SCAPE folder layout with two poses (what --set data.root expects)."""
+def _own_poses(folder: Path, template: str = "mesh000") -> Path:
+    """A copy of the course's SCAPE folder layout with two poses (what --set data.root expects), the template
+    named ``template``."""
     src = COURSE_DATA / "scape"
     shutil.copytree(src, folder, ignore=lambda d, names: [n for n in names if n.endswith(".obj")
                                                           and n not in ("mesh000.obj", "mesh002.obj", "mesh004.obj")])
+    if template != "mesh000":
+        for kind in ("meshes", "flattened_meshes"):
+            (folder / kind / "template" / "mesh000.obj").rename(folder / kind / "template" / f"{template}.obj")
+    return folder
+
+
+def _own_meshes(folder: Path, template: str) -> Path:
+    """A folder of meshes with nothing else, ``template``.obj among them (pipelines/own_meshes.yaml)."""
+    _own_chairs(folder)
+    (folder / "chair0.obj").rename(folder / f"{template}.obj")
     return folder
 
 
@@ -67,13 +79,21 @@ def runnable(command: str, tmp: Path) -> list[str]:
     """The argument list to run for ``command``: placeholders replaced, a private cache and output, and
     ``--dry-run`` for the commands that would compute a whole pipeline."""
     args = shlex.split(command, comments=True)[3:]  # drop "python -m stages"
+    template = next((a.split("=", 1)[1] for a in args if a.startswith("template=")), "mesh000")
     out = []
     for a in args:
         a = re.sub(r"tcp://SCHEDULER:\d+", f"tcp://127.0.0.1:{free_port()}", a)
         if "/path/to/my/chairs" in a:
             a = a.replace("/path/to/my/chairs", str(_own_chairs(tmp / "my_chairs")))
         if "/path/to/my/poses" in a:
-            a = a.replace("/path/to/my/poses", str(_own_poses(tmp / "my_poses")))
+            a = a.replace("/path/to/my/poses", str(_own_poses(tmp / "my_poses", template)))
+        if "/path/to/my/meshes" in a:
+            a = a.replace("/path/to/my/meshes", str(_own_meshes(tmp / "my_meshes", template)))
+        if "/path/to/body_landmarks.txt" in a:
+            (tmp / "body_landmarks.txt").write_text("0,tip\n1,corner\n")
+            a = a.replace("/path/to/body_landmarks.txt", str(tmp / "body_landmarks.txt"))
+        if re.fullmatch(r"\w+\.root=PATH", a):
+            a = a.replace("PATH", str(_own_chairs(tmp / "my_shapes")))
         out.append(a)
     if "--cache" in out:
         out[out.index("--cache") + 1] = str(tmp / "cache")

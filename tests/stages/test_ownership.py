@@ -184,7 +184,7 @@ def test_the_default_report_does_not_replace_a_users_report_html(project, tmp_pa
 def test_a_sweep_figure_does_not_replace_a_users_file(tmp_path, capsys):
     from stages.sweep import plot_sweep
 
-    rows = [{"point": {"sigma": str(s)}, "metrics": {"m": s * 2.0}} for s in (1, 2, 3)]
+    rows = [{"point": {"sigma": str(s)}, "metrics": {"m": m}} for s, m in ((1, 2.0), (2, 5.0), (3, 3.0))]
     assert plot_sweep(rows, str(tmp_path), "sweeps/a.png") == str(tmp_path / "sweeps" / "a.png")
     assert plot_sweep(rows, str(tmp_path), "sweeps/a.png")       # its own: replaced
     (tmp_path / "sweeps" / "b.png").write_bytes(b"my picture")
