@@ -53,6 +53,23 @@ def test_run_dry_run_and_summary_json(tmp_path):
     assert res.returncode == 3 and "not computed yet" in res.stdout
 
 
+def _assert_same_final_values(project, folder, clean, work: str) -> None:
+    """The stored final values of ``project`` (run in ``folder``) equal those of the same pipeline run cleanly in
+    ``clean``, bit for bit."""
+    cwd = os.getcwd()
+    try:
+        a = _final_values(project, folder, [f"work={work}"])
+        b = _final_values(clean / "p.yaml", clean, [f"work={work}"])
+    finally:
+        os.chdir(cwd)
+    assert a.keys() == b.keys()
+    for k in a:
+        if isinstance(a[k], np.ndarray):
+            np.testing.assert_array_equal(a[k], b[k])
+        else:
+            assert a[k] == b[k]
+
+
 def test_kill_9_then_resume_equals_uninterrupted_run(tmp_path):
     work = "100"  # ms per item: the run takes a few seconds
     slow = tmp_path / "killed"
@@ -81,18 +98,7 @@ def test_kill_9_then_resume_equals_uninterrupted_run(tmp_path):
     clean.mkdir()
     make_project(clean, n=40)
     assert cli(["run", "p.yaml", "--set", f"work={work}", "--quiet"], cwd=clean).returncode == 0
-    cwd = os.getcwd()
-    try:
-        a = _final_values(project, slow, [f"work={work}"])
-        b = _final_values(clean / "p.yaml", clean, [f"work={work}"])
-    finally:
-        os.chdir(cwd)
-    assert a.keys() == b.keys()
-    for k in a:
-        if isinstance(a[k], np.ndarray):
-            np.testing.assert_array_equal(a[k], b[k])
-        else:
-            assert a[k] == b[k]
+    _assert_same_final_values(project, slow, clean, work)
 
 
 def test_a_worker_killed_mid_run_then_resume_equals_uninterrupted_run(tmp_path):
@@ -135,18 +141,7 @@ def test_a_worker_killed_mid_run_then_resume_equals_uninterrupted_run(tmp_path):
     clean.mkdir()
     make_project(clean, n=24)
     assert cli(["run", "p.yaml", "--set", f"work={work}", "--workers", "0", "--quiet"], cwd=clean).returncode == 0
-    cwd = os.getcwd()
-    try:
-        a = _final_values(project, slow, [f"work={work}"])
-        b = _final_values(clean / "p.yaml", clean, [f"work={work}"])
-    finally:
-        os.chdir(cwd)
-    assert a.keys() == b.keys()
-    for k in a:
-        if isinstance(a[k], np.ndarray):
-            np.testing.assert_array_equal(a[k], b[k])
-        else:
-            assert a[k] == b[k]
+    _assert_same_final_values(project, slow, clean, work)
     assert (slow / "results" / "syn" / "rep" / "summary.txt").read_bytes() == \
         (clean / "results" / "syn" / "rep" / "summary.txt").read_bytes()
 
