@@ -252,15 +252,20 @@ class _Unresolved:
         self.module = module
 
 
-def _module_tree(name: str) -> tuple[str | None, ast.Module | None]:
-    """(file stamp, parsed source) of module ``name``; (None, None) when it has no readable source."""
-    module = sys.modules.get(name)
-    try:
-        path = inspect.getsourcefile(module)
-        with open(path, encoding="utf-8") as f:
-            return _file_stamp(path), ast.parse(f.read())
-    except (TypeError, OSError, SyntaxError, ValueError):
-        return None, None
+def _module_tree(name: str) -> ast.Module | None:
+    """The parsed source of module ``name`` (None when it has none readable), parsed once per file version."""
+    path = getattr(sys.modules.get(name), "__file__", None)
+    key = ("tree", name, _file_stamp(path))
+    if key not in _TREES:
+        try:
+            with open(inspect.getsourcefile(sys.modules[name]), encoding="utf-8") as f:
+                _TREES[key] = ast.parse(f.read())
+        except (KeyError, TypeError, OSError, SyntaxError, ValueError):
+            _TREES[key] = None
+    return _TREES[key]
+
+
+_TREES: dict[tuple, ast.Module | None] = {}
 
 
 def _module_digest(name: str) -> str:
@@ -268,7 +273,7 @@ def _module_digest(name: str) -> str:
     stamp = _file_stamp(getattr(sys.modules.get(name), "__file__", None))
 
     def compute():
-        _, tree = _module_tree(name)
+        tree = _module_tree(name)
         if tree is None:
             return hashlib.blake2b(f"unreadable:{name}".encode(), digest_size=16).hexdigest(), frozenset()
         return _hash_tree(_strip_docstrings(tree)), frozenset()
@@ -297,7 +302,7 @@ def _statement_digest_and_refs(module: str, name: str, package: str) -> tuple[st
     stamp = _file_stamp(getattr(sys.modules.get(module), "__file__", None))
 
     def compute():
-        _, tree = _module_tree(module)
+        tree = _module_tree(module)
         stmts = _assigning_statements(tree, name) if tree is not None else []
         if not stmts:
             return "", frozenset()
@@ -399,9 +404,8 @@ def _statement_parts(module: str, name: str, value: Any, project: frozenset) -> 
         digest, refs = found
         namespace = dict(getattr(sys.modules.get(module), "__dict__", {}))
         _bind_imports(namespace, refs, project)
-        follow = [p for chain in refs if chain[0] != "import" for p in _resolve(chain, namespace, module, project)]
-        return digest, follow
-    _, tree = _module_tree(module)
+        return digest, _reached(refs, namespace, module, project)
+    tree = _module_tree(module)
     origin = _imported_name(tree, name, package) if tree is not None else None
     if origin is not None and _in_project(origin[0], project):
         return "import", [(f"stmt:{origin[0]}.{origin[1]}", (origin[0], origin[1], value))]
@@ -418,6 +422,11 @@ def _bind_imports(namespace: dict, refs: frozenset, project: frozenset) -> None:
             bound = _import_binding(ref[2], ref[3], project)
             if bound is not None:
                 namespace[ref[1]] = bound
+
+
+def _reached(refs: frozenset, namespace: dict, home: str, project: frozenset) -> list[tuple[str, Any]]:
+    """The project parts the name chains among ``refs`` reach in ``namespace`` (see :func:`_resolve`)."""
+    return [part for chain in refs if chain[0] != "import" for part in _resolve(chain, namespace, home, project)]
 
 
 def _constant_repr(obj: Any, held: list) -> str:
@@ -493,10 +502,7 @@ def code_fingerprint(func: Any, packages: tuple[str, ...] | frozenset = ()) -> t
         parts[qual] = digest
         if not refs:
             continue
-        namespace = _namespace(obj, refs, project)
         home = getattr(inspect.getmodule(obj), "__name__", "?")
-        for chain in refs:
-            if chain[0] != "import":
-                stack.extend(_resolve(chain, namespace, home, project))
+        stack.extend(_reached(refs, _namespace(obj, refs, project), home, project))
     total = hashlib.blake2b(repr(sorted(parts.items())).encode(), digest_size=16).hexdigest()
     return total, parts
