@@ -8,6 +8,7 @@ and the new misses run (like Snakemake's checkpoints).
 """
 from __future__ import annotations
 
+import logging
 import os
 import re
 import shutil
@@ -106,6 +107,8 @@ def make_client(workers: int = 2, scheduler: str | None = None, local_dir: str |
 
     The local cluster's dashboard listens on 127.0.0.1 only; ``log`` (a print-like function) receives its URL.
     Its worker processes ignore Ctrl-C: the client process alone handles it and shuts them down cleanly.
+    dask's own log is kept to CRITICAL: a worker that dies is reported by ``execute`` as its task's failure, not
+    by the surviving workers' connection-reset tracebacks.
 
     Raises:
         UserError: the scheduler does not answer within SCHEDULER_TIMEOUT_S seconds, or its address is malformed.
@@ -120,7 +123,7 @@ def make_client(workers: int = 2, scheduler: str | None = None, local_dir: str |
     with _ctrl_c_ignored_by_children():
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                dashboard_address=DASHBOARD_ADDRESS, local_directory=local_dir,
-                               memory_limit=memory_limit, silence_logs=40)
+                               memory_limit=memory_limit, silence_logs=logging.CRITICAL)
     if log is not None and cluster.dashboard_link:
         log(f"dask dashboard: {cluster.dashboard_link}")
     return Client(cluster)
