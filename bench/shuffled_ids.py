@@ -21,9 +21,9 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import numpy as np  # noqa: E402
 
-# the dense settings of pipeline.yaml (k 60, 1000 samples, 150 patches, 2 hypotheses, 500 evaluated vertices)
+# the dense settings of pipeline.yaml (k 60, 1000 samples, 150 patches, 500 evaluated vertices)
 SETS = ["dense_basis.k=60", "dense_basis.n_samples=1000", "dense_sparse_init.k_init=30", "dense_sparse_init.k_end=60",
-        "dense_auto_init.k_init=30", "dense_auto_init.k_end=60", "dense_auto_init.hypotheses=2",
+        "dense_auto_init.k_init=30", "dense_auto_init.k_end=60",
         "dense_template.n_patches=150", "dense_sparse.n_patches=150", "dense_auto.n_patches=150",
         "dense_measures.n_points=500", "evaluate.frequency_figures=false"]
 

@@ -26,7 +26,8 @@ import numpy as np
 from corr_core import plotting
 from corr_core.correspondence import dense, measures
 from corr_core.correspondence.dense import measures as dense_measures_lib
-from corr_core.correspondence.dense.basis import MeshBasis, map_to_original
+from corr_core.correspondence.dense.basis import MeshBasis, map_to_local, map_to_original
+from corr_core.correspondence.dense.refine import LOW_CONFIDENCE
 from corr_core.correspondence.landmarks import read_landmarks, write_landmarks
 from corr_core.geometry.intrinsic import IntrinsicMesh
 from corr_core.geometry.mesh_io import save_ply
@@ -73,15 +74,17 @@ def _basis(arrays: dict, what: str) -> MeshBasis:
 @register("corr.dense_init", group="correspondence", fanout="item")
 def dense_init(template_basis, target_basis, template_mesh, target_mesh, landmarks, sparse_landmarks,
                landmark_files=None, *, mode: str = "auto", k_init: int = 40, k_end: int = 100,
-               hypotheses: int = 1) -> dict:
+               hypotheses: int | None = None) -> dict:
     """Initial map template -> target: a functional map refined by ZoomOut and the point map of the template
     samples. mode "sparse": from the sparse landmarks given on both meshes (a target without landmarks is
-    skipped: {"skipped": why}); "auto": from nothing on the target (extremities, orientation-aware);
-    ``hypotheses`` > 1 (auto only) also keeps the next ranked maps, for ``corr.dense_refine`` to choose from
-    after refinement (``automatic_hypotheses``: 2 resolves a body whose front and back look alike).
+    skipped: {"skipped": why}); "auto": from nothing on the target (extremities, orientation-aware), with the
+    next ranked maps too, for ``corr.dense_refine`` to choose from after refinement (``automatic_hypotheses``:
+    how many is decided there when ``hypotheses`` is None -- the best two, more when they are close; an
+    integer forces that many, e.g. 1 to time a single hypothesis).
 
-    Returns {"C": (k_end, k_end) float, "p2p_samples": (s,) int local target ids, "mode": str}, with
-    hypotheses > 1 also "C_more": (h, k_end, k_end) and "p2p_samples_more": (h, s) (the other hypotheses).
+    Returns {"C": (k_end, k_end) float, "p2p_samples": (s,) int local target ids, "mode": str}; auto with more
+    than one hypothesis also "C_more": (h, k_end, k_end) and "p2p_samples_more": (h, s) (the others); sparse
+    also "points": (2, L) int local ids of the given points (template row, target row).
     """
     if mode not in ("sparse", "auto"):
         raise ValueError(f"corr.dense_init: mode must be 'sparse' or 'auto', got {mode!r}")
@@ -102,11 +105,14 @@ def dense_init(template_basis, target_basis, template_mesh, target_mesh, landmar
     template_ids, _ = mesh_landmarks(template_mesh, landmarks, landmark_files, template_mesh)
     sparse = sparse_positions(landmarks, sparse_landmarks)
     C, p2p = dense.map_from_points(S, T, template_ids[sparse], target_ids[sparse], k_init=k_init, k_end=k_end)
-    return {"C": C, "p2p_samples": p2p, "mode": mode}
+    points = np.stack([S.to_local(template_ids[sparse], what="template point"),
+                       T.to_local(target_ids[sparse], what="target point")])
+    return {"C": C, "p2p_samples": p2p, "mode": mode, "points": points}
 
 
 @register("corr.dense_refine", group="correspondence", fanout="item")
-def dense_refine(template_basis, target_basis, initial, *, refine: str = dense.DEFAULT_REFINE, n_patches: int = 300,
+def dense_refine(template_basis, target_basis, initial, alternative=None, *, refine: str = dense.DEFAULT_REFINE,
+                 n_patches: int = 300,
                  patch_size: int = 64, rounds: int = 5, icp_iterations: int = 6, stiffness: float = 0.03) -> dict:
     """The dense map: the initial map upsampled to every template vertex (``upsample_spectral``), then refined
     (``refine``: steps of ``refine.refine_map``; "extrinsic+spectral+deform" = patch-wise rigid ICP, full-resolution
@@ -114,8 +120,13 @@ def dense_refine(template_basis, target_basis, initial, *, refine: str = dense.D
     ``icp_iterations``: ``refine_extrinsic``'s; ``stiffness``: ``refine_deform``'s. Several initial hypotheses
     (``corr.dense_init`` with hypotheses > 1): each is refined and the least distorted result kept
     (``refine.refine_best``). Returns {"vertex_map": (n_template,) int target vertex id (original ids; -1 off the
-    template's kept component), "hypothesis": index of the kept initial map (0: the best ranked)} or
-    {"skipped": why}."""
+    template's kept component), "hypothesis": index of the kept initial map (0: the best ranked), "distortions":
+    (h,) ``map_distortion`` of every refined hypothesis, "confidence": float in [0, 1], no ground truth needed
+    (several hypotheses: ``BestMap.confidence``, the kept map's distortion margin over the runner-up; given
+    points: ``points_agreement``, the fraction of them the map keeps; absent with a single automatic
+    hypothesis)} or {"skipped": why}. With given points and an ``alternative`` (another ``corr.dense_refine``
+    result of the same pair, e.g. dense_auto's), that map is kept instead when it keeps the given points and is
+    less distorted (``refine.best_with_points``; "hypothesis": "alternative"): points never make a map worse."""
     if "skipped" in initial:
         return {"skipped": initial["skipped"]}
     S, T = _basis(template_basis, "template"), _basis(target_basis, "target")
@@ -125,8 +136,19 @@ def dense_refine(template_basis, target_basis, initial, *, refine: str = dense.D
     maps = [dense.upsample_spectral(S, T, np.asarray(C), np.asarray(p2p)) for C, p2p in starts]
     extrinsic = {"n_patches": n_patches, "patch_size": patch_size, "rounds": rounds, "icp_iterations": icp_iterations}
     options = {"extrinsic": extrinsic, "deform": {"stiffness": stiffness}}
-    p2p, kept, _ = dense.refine_best(S, T, maps, refine, options)
-    return {"vertex_map": map_to_original(S, T, p2p), "hypothesis": kept}
+    best = dense.refine_best(S, T, maps, refine, options)
+    hypothesis = best.index
+    if "points" in initial:
+        points = np.asarray(initial["points"])
+        if alternative and "vertex_map" in alternative:
+            best = dense.best_with_points(S, T, [best.p2p, map_to_local(S, T, alternative["vertex_map"])], *points)
+            hypothesis = "alternative" if best.index == 1 else hypothesis
+        confidence = dense.points_agreement(T, best.p2p, *points)
+    else:
+        confidence = best.confidence if len(maps) > 1 else None
+    out = {"vertex_map": map_to_original(S, T, best.p2p), "hypothesis": hypothesis,
+           "distortions": np.asarray(best.distortions)}
+    return out if confidence is None else {**out, "confidence": float(confidence)}
 
 
 def _given_maps(inputs: dict) -> dict:
@@ -261,6 +283,37 @@ def _skipped(results: dict | None) -> dict:
     return {m: r["skipped"] for m, r in sorted((results or {}).items()) if "skipped" in r}
 
 
+def _per_mesh_rows(method: str, results: dict | None, per_mesh: dict) -> dict:
+    """{mesh: {"mean_error": float | None (no ground truth), "landmark_accuracy": float | None,
+    "confidence": float | None}} of one method's maps (skipped meshes left out)."""
+    rows = {}
+    for m, r in sorted((results or {}).items()):
+        if "vertex_map" not in r:
+            continue
+        measured = per_mesh.get(m, {})
+        errors = measured.get("errors", {}).get(method)
+        nearest = measured.get("nearest", {}).get(method)
+        rows[m] = {"mean_error": float(np.mean(errors)) if errors is not None and len(errors) else None,
+                   "landmark_accuracy": (dense_measures_lib.landmark_accuracy(nearest) if nearest is not None
+                                     else None),
+                   "confidence": float(r["confidence"]) if "confidence" in r else None}
+    return rows
+
+
+def _low_confidence_warnings(dense_summary: dict) -> list[str]:
+    """One sentence per map whose confidence is below ``LOW_CONFIDENCE`` (``dense.refine``)."""
+    out = []
+    for method, summary in dense_summary.items():
+        for m, row in summary.get("per_mesh", {}).items():
+            c = row["confidence"]
+            if c is not None and c < LOW_CONFIDENCE:
+                why = ("the map keeps few of the given points" if method == "dense_sparse" else
+                       "another starting map (e.g. the shape turned by 180 degrees or mirrored) refined almost as well")
+                out.append(f"{method} map of {m} has low confidence {c:.2f} ({why}): look at "
+                           f"dense_maps/{method}/{m}.ply before using it")
+    return out
+
+
 def dense_reports(names: list[str], dense_sparse, dense_auto, per_mesh, out_dir: str) -> tuple[dict, dict]:
     """The dense part of ``corr.evaluate``: (method reports for the landmark accuracy, like the course
     methods', {mesh: {"all": nearest}}), and the summary {"dense": {method: summary}, "landmark_error":
@@ -276,6 +329,11 @@ def dense_reports(names: list[str], dense_sparse, dense_auto, per_mesh, out_dir:
               for method in ("mobius",) + METHODS}
     errors = {k: v for k, v in errors.items() if v.size}
     out["dense"] = {k: dense_measures_lib.summary(e) for k, e in errors.items() if k in METHODS}
+    for method, results in (("dense_sparse", dense_sparse), ("dense_auto", dense_auto)):
+        rows = _per_mesh_rows(method, results, per_mesh)
+        if rows:
+            out["dense"].setdefault(method, {})["per_mesh"] = rows
+    out["warnings"] = _low_confidence_warnings(out["dense"])
     out["dense_n_points"] = {k: int(e.size) for k, e in errors.items()}
     lm = {method: [r["landmark_errors"][method] for r in per_mesh.values() if method in r.get("landmark_errors", {})]
           for method in METHODS}

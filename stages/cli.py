@@ -260,6 +260,9 @@ def _dispatch(args) -> int:
             pairs, n_headline = headline_first(plan, m)
             if pairs:
                 print(format_results(pairs, n_headline))
+            for stage, warnings in m.get("_warnings", {}).items():
+                for w in warnings:
+                    print(f"warning ({stage}): {w}")
         return 0 if "_not_computed" not in m else 3
     if args.command == "gc":
         res = api.gc(args.pipelines, args.cache, dry=args.dry_run, keep_sweeps=not args.no_keep_sweeps,

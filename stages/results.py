@@ -12,7 +12,10 @@ def metrics(plan: Plan) -> dict:
     A dict-valued result contributes its keys, any other value appears under the stage name. Stages not
     computed yet are listed under ``"_not_computed"``, stages skipped (an optional input is absent) under
     ``"_skipped"`` ({stage: why}); the items a metrics stage was computed without (they failed upstream) under
-    ``"_left_out"`` ({stage: [{"item": "views[s003]", "why": "ValueError: ..."}]}).
+    ``"_left_out"`` ({stage: [{"item": "views[s003]", "why": "ValueError: ..."}]}). A dict result's
+    ``"warnings"`` (a list of sentences: what a user should look at, e.g. a result the stage is unsure of) is
+    gathered under ``"_warnings"`` ({stage: [str]}) instead, so two stages' warnings never overwrite each other;
+    ``results`` prints them and the report shows them on its first screen.
     """
     merged: dict[str, Any] = {}
     missing = []
@@ -33,6 +36,10 @@ def metrics(plan: Plan) -> dict:
                 merged.setdefault("_left_out", {})[name] = [{"item": failed, "why": why}
                                                             for _, failed, _, why in left_out]
             if isinstance(value, dict):
+                value = dict(value)
+                warnings = value.pop("warnings", None)
+                if warnings:
+                    merged.setdefault("_warnings", {}).setdefault(name, []).extend(str(w) for w in warnings)
                 merged.update(value)
             else:
                 merged[name] = value

@@ -149,6 +149,9 @@ def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None,
     if summary_json:
         os.makedirs(os.path.dirname(os.path.abspath(summary_json)), exist_ok=True)
         atomic_write_text(summary_json, json.dumps(summary, indent=2))
+    for stage, warnings in (m or {}).get("_warnings", {}).items():   # a metrics stage's "check this" sentences
+        for w in warnings:
+            log(f"warning ({stage}): {w}")
     for f in summary["failures"]:  # printed even with --quiet: which item failed, and why
         print(f"FAILED {f['stage']}[{f['item']}]: {f['error']}", file=sys.stderr, flush=True)
     if summary["skipped"]:

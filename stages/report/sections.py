@@ -106,6 +106,10 @@ def summary_section(ctx: ReportContext) -> str:
                      + esc("; ".join(f"{x['item']}: {x['why']}" for x in items[:20])) + ".</p>")
     for stage, why in m.get("_skipped", {}).items():
         parts.append(f'<p class="note">{esc(stage)} skipped: {esc(why)}.</p>')
+    for stage, warnings in m.get("_warnings", {}).items():     # a stage's own "check this" sentences
+        parts.append("".join(f'<p class="bad warning">{esc(stage)}: {esc(w)}</p>' for w in warnings[:20])
+                     + (f'<p class="bad">{esc(stage)}: {len(warnings) - 20} more warning(s) in '
+                        "<code>results --json</code>.</p>" if len(warnings) > 20 else ""))
     parts += [_headline_block(ctx, t) for t in ctx.headlines]
     rows = [["pipeline", plan.pipeline.name], ["file", plan.pipeline.file],
             ["overrides", " ".join(ctx.overrides) or "(none)"], ["output folder", plan.pipeline.output_dir],

@@ -96,12 +96,16 @@ def collect_pairs(distances) -> dict:
 
 
 @register("synthetic.summarize", fanout="once")
-def summarize(distances, *, sigma: float = 1.0) -> dict:
-    """Collection-level metrics from the (N,N) distance matrix: mean affinity at ``sigma``."""
+def summarize(distances, *, sigma: float = 1.0, warn_below: float = 0.0) -> dict:
+    """Collection-level metrics from the (N,N) distance matrix: mean affinity at ``sigma``; a "warnings" entry
+    when it is below ``warn_below``."""
     M = np.asarray(distances["matrix"], dtype=np.float64)
     W = np.exp(-M / (sigma * np.median(M[M > 0]) if np.any(M > 0) else 1.0))
-    return {"n_items": int(len(M)), "mean_affinity": float(W.mean()), "sigma": float(sigma),
-            "names": list(distances["names"])}
+    out = {"n_items": int(len(M)), "mean_affinity": float(W.mean()), "sigma": float(sigma),
+           "names": list(distances["names"])}
+    if out["mean_affinity"] < warn_below:
+        out["warnings"] = [f"mean affinity {out['mean_affinity']:.3f} is below {warn_below} at sigma {sigma}"]
+    return out
 
 
 @register("synthetic.collect", fanout="once")

@@ -24,21 +24,22 @@ import numpy as np
 from corr_core.correspondence.dense.basis import MeshBasis, map_to_original, mesh_basis
 from corr_core.correspondence.dense.deform import refine_deform
 from corr_core.correspondence.dense.init import automatic_hypotheses, map_automatic, map_from_points
-from corr_core.correspondence.dense.refine import (DEFAULT_REFINE, map_distortion, refine_best, refine_extrinsic,
-                                                   refine_geodesic, refine_map, refine_spectral, upsample_spectral)
+from corr_core.correspondence.dense.refine import (DEFAULT_REFINE, BestMap, best_with_points, map_distortion,
+                                                   points_agreement, refine_best, refine_extrinsic, refine_geodesic,
+                                                   refine_map, refine_spectral, upsample_spectral)
 from corr_core.correspondence.dense.transfer import format_dense_map, read_dense_map, transfer_landmarks
 
 __all__ = ["MeshBasis", "mesh_basis", "map_to_original", "dense_map", "map_from_points", "map_automatic",
            "automatic_hypotheses", "upsample_spectral", "refine_extrinsic", "refine_geodesic", "refine_deform",
-           "refine_map", "refine_spectral", "refine_best", "map_distortion", "DEFAULT_REFINE", "transfer_landmarks",
-           "format_dense_map", "read_dense_map"]
+           "refine_map", "refine_spectral", "refine_best", "BestMap", "best_with_points", "map_distortion",
+           "points_agreement", "DEFAULT_REFINE", "transfer_landmarks", "format_dense_map", "read_dense_map"]
 
 
 def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarray, F_target: np.ndarray,
               landmarks_template=None, landmarks_target=None, *, k: int = 100, k_init: int = 40,
               refine: str | None = DEFAULT_REFINE, basis_template: MeshBasis | None = None,
               basis_target: MeshBasis | None = None, refine_options: dict | None = None,
-              hypotheses: int = 1) -> np.ndarray:
+              hypotheses: int | None = None) -> np.ndarray:
     """Dense map template -> target.
 
     Args:
@@ -53,9 +54,10 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
             joined by "+", or None.
         basis_template, basis_target: precomputed ``mesh_basis`` results (reuse them across pairs).
         refine_options: {step: kwargs} for the refinement functions (step: "extrinsic", "spectral", ...).
-        hypotheses: automatic mode only: how many ranked initial maps are refined (``init.automatic_hypotheses``);
-            the least distorted refined map is kept (``refine.refine_best``). 2 resolves the 180-degree turn of a
-            body whose front and back look alike, at the cost of a second ZoomOut and refinement.
+        hypotheses: automatic mode only: how many ranked initial maps are refined (``init.automatic_hypotheses``;
+            None: decided there, ``init.hypotheses_to_refine``: the best two, more when they are close); the
+            least distorted refined map is kept (``refine.refine_best``), which resolves the 180-degree turn of
+            a body whose front and back look alike.
     Returns:
         (n_s,) int64 target vertex id (original ids) of every template vertex; -1 for template vertices off the
         template's largest connected component (loose pieces, unused vertices: see ``basis``).
@@ -74,4 +76,4 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
                              f"{lt.shape}")
         starts = [map_from_points(S, T, ls, lt, k_init=k_init, k_end=k)]
     maps = [upsample_spectral(S, T, C, p2p_samples) for C, p2p_samples in starts]
-    return map_to_original(S, T, refine_best(S, T, maps, refine, refine_options)[0])
+    return map_to_original(S, T, refine_best(S, T, maps, refine, refine_options).p2p)

@@ -246,6 +246,16 @@ def map_to_original(source: MeshBasis, target: MeshBasis, p2p: np.ndarray) -> np
     return out
 
 
+def map_to_local(source: MeshBasis, target: MeshBasis, vertex_map: np.ndarray) -> np.ndarray:
+    """The inverse of ``map_to_original``: (source.n_full,) int original target ids -> (n_s,) int local ids.
+
+    Raises ValueError when a vertex of the template's kept component maps off the target's kept component."""
+    vertex_map = np.asarray(vertex_map, dtype=np.int64)
+    if vertex_map.shape != (source.n_full,):
+        raise ValueError(f"vertex map has shape {vertex_map.shape}, the template {source.n_full} vertices")
+    return target.to_local(vertex_map[source.vids], what="mapped vertex")
+
+
 def face_gradients(basis: MeshBasis, funcs: np.ndarray) -> np.ndarray:
     """Per-face gradients of piecewise-linear vertex functions.
 

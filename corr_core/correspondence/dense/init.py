@@ -38,6 +38,14 @@ from corr_core.geometry.primitives import vertex_adjacency
 LOCAL_SCALES = (0.1, 0.2, 0.4)       # widths of exp(-(d/s)^2), units sqrt(area)
 CHIRALITY_WEIGHT = 0.3
 CHIRALITY_POOL = 2 / 3          # candidates kept: chirality agreement above this fraction of the best's
+# How many ranked initial maps the automatic mode refines (``hypotheses_to_refine``): always the best two (the
+# second is the reference of the map's confidence, ``refine.BestMap``), and any further candidate of the chirality
+# pool whose WKS disagreement is within HYPOTHESIS_WKS_RATIO of the best's, up to MAX_HYPOTHESES. On generated
+# bodies (`python /tmp/exp/hyp.py bodies SEED`, seeds 0-9, in docs/dense.md) the true map and its 180-degree turn
+# are within 1.06x of each other; twists (a limb pair swapped) are outside the pool.
+MIN_HYPOTHESES = 2
+MAX_HYPOTHESES = 3
+HYPOTHESIS_WKS_RATIO = 1.10
 
 
 def point_features(basis: MeshBasis, points: np.ndarray, chirality_weight: float = CHIRALITY_WEIGHT,
@@ -304,19 +312,36 @@ def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarra
     return (*out[0][0], out[1]) if return_info else out[0]
 
 
-def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int = 2, points_source: np.ndarray | None = None,
+def hypotheses_to_refine(ranked: list[dict], keep_fraction: float = CHIRALITY_POOL,
+                         wks_ratio: float = HYPOTHESIS_WKS_RATIO, at_least: int = MIN_HYPOTHESES,
+                         at_most: int = MAX_HYPOTHESES) -> int:
+    """How many of the ranked candidates (``_ranked``: dicts with "chirality" and "wks") to refine: at least
+    ``at_least`` (when there are that many), plus those in the chirality pool whose WKS disagreement is within
+    ``wks_ratio`` times the best's, at most ``at_most``."""
+    if not ranked:
+        return 0
+    best = max(c["chirality"] for c in ranked)
+    close = [i for i, c in enumerate(ranked) if best > 0 and c["chirality"] > keep_fraction * best
+             and c["wks"] <= wks_ratio * ranked[0]["wks"]]
+    n = max([min(at_least, len(ranked))] + [i + 1 for i in close])
+    return int(min(n, at_most, len(ranked)))
+
+
+def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int | None = None,
+                         points_source: np.ndarray | None = None,
                          points_target: np.ndarray | None = None, keep: int = 4, k_init: int = 40,
                          k_probe: int = 60, k_end: int = 100, step: int = 2, n_probe: int = 1000,
                          orientation_neighbours: int = 64, return_info: bool = False):
-    """The ``n`` best ranked automatic maps (``_ranked``: ``map_automatic``'s choice first, then the next in the
-    same order), each taken on to ``k_end``. With n = 2 the true map and the 180-degree turn of a body whose front
-    and back look alike both come out, and ``refine.refine_best`` keeps the one that refines to the less
-    distorted map. Arguments as ``map_automatic``.
+    """The best ranked automatic maps (``_ranked``: ``map_automatic``'s choice first, then the next in the
+    same order), each taken on to ``k_end``: ``n`` of them, or when ``n`` is None as many as
+    ``hypotheses_to_refine`` decides (the best two, more when they are close). The true map and the 180-degree
+    turn of a body whose front and back look alike both come out, and ``refine.refine_best`` keeps the one that
+    refines to the less distorted map. Arguments as ``map_automatic``.
 
     Returns: [(C, p2p_samples)] (at most n, best ranked first); with ``return_info`` also ``map_automatic``'s dict.
     """
-    if int(n) < 1:
-        raise ValueError(f"automatic_hypotheses: n must be >= 1, got {n}")
+    if n is not None and int(n) < 1:
+        raise ValueError(f"automatic_hypotheses: n must be >= 1 (or None: decided here), got {n}")
     Ps = (cached_extremities(source) if points_source is None
           else source.to_local(points_source, what="template point"))
     Pt = extremities(target) if points_target is None else target.to_local(points_target, what="target point")
@@ -344,7 +369,8 @@ def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int = 2, point
             candidate["orientation"] = orientation_agreement(source, target, p2p, neighbours=orientation_neighbours)
             candidate["hks"] = hks_disagreement(source, target, p2p)
         info["candidates"].append(candidate)
-    ranked = _ranked(info["candidates"])[:int(n)]
+    ranked = _ranked(info["candidates"])
+    ranked = ranked[:hypotheses_to_refine(ranked) if n is None else int(n)]
     s, t = ranked[0]["source"], ranked[0]["target"]
     info["chosen"] = (Ps[s], Pt[t])
     maps = [_zoomout_and_match(source, target, c["map"][0], k_end, step, 2000, True) for c in ranked]

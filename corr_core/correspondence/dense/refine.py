@@ -28,6 +28,8 @@ refined map is least distorted (``map_distortion``).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -285,6 +287,10 @@ def map_distortion(source: MeshBasis, target: MeshBasis, p2p: np.ndarray) -> flo
 
     A near-isometric map keeps edge lengths up to one scale; a map that twists a limb (the 180-degree turn of a
     body, forced to keep its feet pointing forward) shears it and scores higher. Args: p2p (n_s,) int local ids.
+    The twist shows at the scale of the edges: measured over pairs of farthest-point samples further apart
+    (300 samples, 8 neighbours), the true map and the turn of a small body tied; on a target much coarser than
+    the template the two come closer (its vertices quantize the images), which the confidence reports
+    (docs/dense.md "Confidence").
     """
     edges, _ = unique_edges(source.F)
     p2p = np.asarray(p2p, dtype=np.int64)
@@ -297,20 +303,92 @@ def map_distortion(source: MeshBasis, target: MeshBasis, p2p: np.ndarray) -> flo
     return float(np.mean(np.abs(log_ratio - np.median(log_ratio))))
 
 
+POINTS_TOLERANCE = 0.1   # units sqrt(target area): a given point's image this close to its given target counts
+
+
+def points_agreement(target: MeshBasis, p2p: np.ndarray, points_source: np.ndarray, points_target: np.ndarray,
+                     tolerance: float = POINTS_TOLERANCE) -> float:
+    """Fraction of the given points that a dense map keeps: template point i's image is within ``tolerance``
+    (3D distance / sqrt(target area)) of target point i. The confidence of a map made from given points (a map
+    turned or mirrored against them scores near 0).
+
+    Args: p2p (n_s,) int local target ids; points_source, points_target: (L,) int local ids, corresponding.
+    """
+    images = target.V[np.asarray(p2p)[np.asarray(points_source, dtype=np.int64)]]
+    gap = np.linalg.norm(images - target.V[np.asarray(points_target, dtype=np.int64)], axis=1) / target.scale
+    return float(np.mean(gap <= tolerance)) if len(gap) else float("nan")
+
+
+MIN_POINTS_KEPT = 0.8     # another map replaces the one made from given points only if it keeps this many of them
+
+
+def best_with_points(source: MeshBasis, target: MeshBasis, maps: list, points_source: np.ndarray,
+                     points_target: np.ndarray, min_kept: float = MIN_POINTS_KEPT) -> BestMap:
+    """The least distorted of several refined maps (``map_distortion``) among those that keep the given points:
+    ``maps[0]`` (the map made from them) always qualifies, any other one (e.g. the automatic map of the same pair)
+    when ``points_agreement`` >= ``min_kept``. So given points never make a map worse than the automatic one when
+    that one agrees with them (points placed a little off on a scan pull the map made from them).
+
+    Args: maps: [(n_s,) int local ids], refined; points_source, points_target: (L,) int local ids.
+    Returns: ``BestMap`` over the qualifying maps (distortions of the others: inf).
+    """
+    if not len(maps):
+        raise ValueError("best_with_points: no map given")
+    scores = tuple(map_distortion(source, target, m) if i == 0 or points_agreement(
+        target, m, points_source, points_target) >= min_kept else float("inf") for i, m in enumerate(maps))
+    best = int(np.argmin(scores))
+    return BestMap(np.asarray(maps[best]), best, scores)
+
+
+# The distortion margin at which a kept map counts as sure (confidence 1): the runner-up hypothesis refined to a
+# map this much (relative) more distorted. On generated bodies (`python /tmp/exp/hyp.py bodies SEED`, seeds 0-9,
+# docs/dense.md "Confidence") the true map beat its 180-degree turn by 0.10-0.40.
+CONFIDENT_MARGIN = 0.10
+LOW_CONFIDENCE = 0.5     # below this a map is reported for a look (half the margin of a sure choice)
+
+
+@dataclass(frozen=True)
+class BestMap:
+    """The result of ``refine_best``: p2p (n_s,) int local ids of the kept refined map, index: its position among
+    the hypotheses, distortions: ``map_distortion`` of every refined hypothesis (same order)."""
+    p2p: np.ndarray
+    index: int
+    distortions: tuple[float, ...]
+
+    @property
+    def margin(self) -> float:
+        """(runner-up's distortion - kept one's) / kept one's: >= 0; inf with a single hypothesis (nothing to
+        compare with) or a kept map of zero distortion."""
+        kept = self.distortions[self.index]
+        others = [d for i, d in enumerate(self.distortions) if i != self.index]
+        if not others or kept <= 0:
+            return float("inf")
+        return float((min(others) - kept) / kept)
+
+    @property
+    def confidence(self) -> float:
+        """How sure the choice among the hypotheses is, in [0, 1], without ground truth: margin / CONFIDENT_MARGIN,
+        capped at 1. Near 0: another hypothesis (e.g. the body turned by 180 degrees or mirrored) refined to an
+        almost equally good map, so the kept one may be flipped. NaN with a single hypothesis."""
+        if len(self.distortions) < 2:
+            return float("nan")
+        return float(min(1.0, self.margin / CONFIDENT_MARGIN))
+
+
 def refine_best(source: MeshBasis, target: MeshBasis, maps: list, refine: str | None = DEFAULT_REFINE,
-                options: dict | None = None) -> tuple[np.ndarray, int, list[float]]:
+                options: dict | None = None) -> BestMap:
     """Refine each of several hypothesis maps (``refine_map``) and keep the least distorted result.
 
     Args: maps: [(n_s,) int local ids], e.g. the upsampled maps of ``init.automatic_hypotheses``.
-    Returns: (the kept refined map (n_s,) int, its index in ``maps``, ``map_distortion`` of every refined map).
-    Ties go to the earlier hypothesis (the better ranked one).
+    Returns: ``BestMap`` (the kept refined map, its index in ``maps``, every refined map's ``map_distortion``;
+    its ``confidence`` says how clear the choice was). Ties go to the earlier hypothesis (the better ranked one).
     """
     if not len(maps):
         raise ValueError("refine_best: no hypothesis map given")
     refined = [refine_map(source, target, m, refine, options) for m in maps]
-    scores = [map_distortion(source, target, m) for m in refined]
+    scores = tuple(map_distortion(source, target, m) for m in refined)
     best = int(np.argmin(scores))
-    return refined[best], best, scores
+    return BestMap(refined[best], best, scores)
 
 
 REFINE_STEPS = {"extrinsic": refine_extrinsic, "spectral": refine_spectral, "deform": refine_deform,

@@ -164,12 +164,13 @@ def test_loose_pieces_and_unused_vertices_keep_original_ids(body):
 
 
 def test_two_hypotheses_give_a_good_automatic_map_and_rank_the_turn_second(body):
-    """hypotheses=2 refines the two best ranked initial maps and keeps the less distorted one: on a pose of the
-    same body it is the right map, and the second hypothesis is the 180-degree turn (left and right swapped)."""
+    """The automatic mode refines the two best ranked initial maps (at least; decided by
+    ``hypotheses_to_refine``) and keeps the less distorted one: on a pose of the same body it is the right map,
+    and the second hypothesis is the 180-degree turn (left and right swapped)."""
     from corr_core.correspondence.dense import automatic_hypotheses, map_automatic
 
     truth = np.arange(len(body["V"]))
-    p2p = _run(body, body["Vp"], body["F"], body["T"], hypotheses=2)
+    p2p = _run(body, body["Vp"], body["F"], body["T"])
     assert _mean_error(body["Vp"], body["F"], p2p, truth) < 0.03
     assert _sides_kept(body, body["Vp"], body["F"], p2p, truth)
     maps = automatic_hypotheses(body["S"], body["T"], 2, k_init=K_INIT, k_end=K)
@@ -180,5 +181,20 @@ def test_two_hypotheses_give_a_good_automatic_map_and_rank_the_turn_second(body)
     samples = body["S"].samples[:len(p2ps[1])]
     far = np.linalg.norm(body["Vp"][p2ps[1]] - body["Vp"][samples], axis=1) > 0.1 * body["T"].scale
     assert far.mean() > 0.5                                           # the other hypothesis is a different map
+    assert 2 <= len(automatic_hypotheses(body["S"], body["T"], k_init=K_INIT, k_end=K)) <= 3   # decided there
     with pytest.raises(ValueError, match="n must be >= 1"):
         automatic_hypotheses(body["S"], body["T"], 0)
+
+
+def test_hypotheses_to_refine_takes_the_best_two_and_any_close_pool_candidate():
+    from corr_core.correspondence.dense.init import HYPOTHESIS_WKS_RATIO, hypotheses_to_refine
+
+    def ranked(*pairs):
+        return [{"chirality": c, "wks": w} for c, w in pairs]
+
+    assert hypotheses_to_refine(ranked((0.8, 0.05), (0.3, 0.09))) == 2                  # the runner-up, always
+    close = 0.05 * (HYPOTHESIS_WKS_RATIO - 0.01)
+    assert hypotheses_to_refine(ranked((0.8, 0.05), (0.8, 0.051), (0.79, close), (0.8, close))) == 3   # at most 3
+    assert hypotheses_to_refine(ranked((0.8, 0.05), (0.8, 0.051), (0.3, close))) == 2    # a twist: not in the pool
+    assert hypotheses_to_refine(ranked((0.8, 0.05), (0.8, 0.051), (0.8, 0.08))) == 2     # far in WKS
+    assert hypotheses_to_refine(ranked((0.8, 0.05))) == 1 and hypotheses_to_refine([]) == 0

@@ -95,11 +95,33 @@ def test_refine_best_keeps_the_less_distorted_hypothesis_whatever_its_rank(pair)
     S, T = pair
     truth, turned = np.arange(S.n), _turned_map(S, T)
     for maps, right in (([turned, truth], 1), ([truth, turned], 0)):
-        kept, index, scores = refine_best(S, T, maps, refine=None)
-        assert index == right and np.array_equal(kept, maps[right])
-        assert scores == [map_distortion(S, T, m) for m in maps]
+        best = refine_best(S, T, maps, refine=None)
+        assert best.index == right and np.array_equal(best.p2p, maps[right])
+        assert best.distortions == tuple(map_distortion(S, T, m) for m in maps)
+        assert 0 < best.confidence <= 1 and best.margin > 0
     with pytest.raises(ValueError, match="no hypothesis"):
         refine_best(S, T, [])
+
+
+def test_confidence_is_low_when_two_hypotheses_refine_alike_and_nan_for_one():
+    from corr_core.correspondence.dense import BestMap
+    from corr_core.correspondence.dense.refine import CONFIDENT_MARGIN
+
+    p2p = np.zeros(3, dtype=np.int64)
+    assert BestMap(p2p, 0, (0.20, 0.20)).confidence == 0.0                  # a tie: no idea which is right
+    assert BestMap(p2p, 1, (0.30, 0.20)).confidence == 1.0                  # 50 % margin: sure
+    half = BestMap(p2p, 0, (0.20, 0.20 * (1 + CONFIDENT_MARGIN / 2), 0.5))  # the runner-up decides, not the last
+    assert half.confidence == pytest.approx(0.5) and half.margin == pytest.approx(CONFIDENT_MARGIN / 2)
+    assert np.isnan(BestMap(p2p, 0, (0.2,)).confidence)
+
+
+def test_points_agreement_counts_the_given_points_a_map_keeps(pair):
+    from corr_core.correspondence.dense import points_agreement
+
+    S, T = pair
+    points = S.samples[:6]
+    assert points_agreement(T, np.arange(S.n), points, points) == 1.0
+    assert points_agreement(T, _turned_map(S, T), points, points) <= 0.5
 
 
 def _thin_plate(n: int = 17, thickness: float = 0.02):
@@ -138,3 +160,26 @@ def test_refine_extrinsic_keeps_each_side_of_a_thin_part():
     out = refine_extrinsic(S, T, np.arange(S.n), n_patches=40, patch_size=32, rounds=3)
     on_top = top[out[top]]
     assert on_top.mean() > 0.95, on_top.mean()
+
+
+def test_best_with_points_takes_a_less_distorted_map_only_if_it_keeps_the_given_points(pair):
+    from corr_core.correspondence.dense import best_with_points
+
+    S, T = pair
+    truth, turned = np.arange(S.n), _turned_map(S, T)
+    points = S.samples[:6]
+    kept = best_with_points(S, T, [turned, truth], points, points)          # the true map keeps the points
+    assert kept.index == 1 and np.array_equal(kept.p2p, truth)
+    assert best_with_points(S, T, [truth, turned], points, points).index == 0
+    lying = best_with_points(S, T, [turned, truth], points, _turned_map(S, T)[points])   # points given turned
+    assert lying.index == 0 and np.isinf(lying.distortions[1])             # the other map does not keep them
+
+
+def test_map_to_local_inverts_map_to_original(pair):
+    from corr_core.correspondence.dense.basis import map_to_local, map_to_original
+
+    S, T = pair
+    p2p = _turned_map(S, T)
+    assert np.array_equal(map_to_local(S, T, map_to_original(S, T, p2p)), p2p)
+    with pytest.raises(ValueError, match="vertex map has shape"):
+        map_to_local(S, T, p2p[:-1])

@@ -1,0 +1,152 @@
+"""Every automatic starting map refined, on generated bodies of other people: which one the distortion keeps,
+by what margin, and whether it is the right one (the data behind ``init.HYPOTHESIS_WKS_RATIO``,
+``refine.CONFIDENT_MARGIN`` and ``refine.LOW_CONFIDENCE``; never tuned on the course poses).
+
+Per seed, ``write_humanoid_dataset(n_poses, seed, vary_bodies=True)`` (the generator of pipelines/bodies.yaml:
+each pose is another person too; vertex i <-> i is the truth, used only to score), with ``--decimated`` also a
+decimated, vertex-shuffled copy of pose 1 (other connectivity). For every target the ``--candidates`` best ranked
+initial maps (``init.automatic_hypotheses``) are each upsampled and refined (``refine.refine_map``, the default
+steps, the bodies pipeline's settings: k 60, 1000 samples, 150 patches) and printed: chirality agreement, WKS
+disagreement, refined ``map_distortion``, mean geodesic error / sqrt(area) at 500 template samples, landmark
+accuracy (< 0.5: a flipped map). The summary: targets, flips of the map ``refine_best`` keeps among the
+hypotheses ``hypotheses_to_refine`` selects, its confidence, and the smallest margin of a right choice.
+
+Run:  python bench/dense_hypotheses.py [--seeds 0-9] [--poses 6] [--decimated] [--json OUT]
+"""
+from __future__ import annotations
+
+import argparse
+import glob
+import json
+import os
+import sys
+import tempfile
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from bench._env import one_blas_thread  # noqa: E402
+
+if __name__ == "__main__":
+    one_blas_thread()
+
+import numpy as np  # noqa: E402
+
+SETTINGS = {"k": 60, "n_samples": 1000, "k_init": 30, "n_patches": 150, "eval_vertices": 500}
+
+
+def _seed_range(text: str) -> list[int]:
+    """"0-9" or "0,3,5" -> [ints]."""
+    if "-" in text:
+        a, b = text.split("-")
+        return list(range(int(a), int(b) + 1))
+    return [int(x) for x in text.split(",")]
+
+
+def score_candidates(S, T, V_t, F_t, truth, landmarks, n_candidates: int) -> list[dict]:
+    """Every one of the ``n_candidates`` best ranked starting maps, refined and scored (module docstring)."""
+    from corr_core.correspondence.dense import init, measures, refine, upsample_spectral
+    from corr_core.correspondence.dense.basis import map_to_original
+    from corr_core.correspondence.dense.transfer import transfer_landmarks
+    from corr_core.geometry.geodesic import GeodesicSolver
+
+    maps, info = init.automatic_hypotheses(S, T, n_candidates, k_init=SETTINGS["k_init"], k_end=SETTINGS["k"],
+                                           return_info=True)
+    ranked = init._ranked(info["candidates"])
+    solver = GeodesicSolver(V_t, F_t)
+    rows = []
+    for c, (C, p2p) in zip(ranked, maps):
+        refined = refine.refine_map(S, T, upsample_spectral(S, T, C, p2p), refine.DEFAULT_REFINE,
+                                    {"extrinsic": {"n_patches": SETTINGS["n_patches"]}})
+        vertex_map = map_to_original(S, T, refined)
+        errors = measures.dense_errors(V_t, F_t, {"m": vertex_map}, truth,
+                                       vertices=S.vids[S.samples[:SETTINGS["eval_vertices"]]], solver=solver)["m"]
+        _, nearest = measures.landmark_errors(V_t, F_t, transfer_landmarks(vertex_map, landmarks),
+                                              truth[landmarks], solver=solver)
+        rows.append({"chirality": c["chirality"], "wks": c["wks"], "distortion": refine.map_distortion(S, T, refined),
+                     "mean_error": float(errors.mean()), "landmark_accuracy": measures.landmark_accuracy(nearest)})
+    return rows
+
+
+def choice(rows: list[dict]) -> dict:
+    """What the automatic mode does with these scored candidates: how many it refines, which it keeps, its
+    confidence, and whether that map is right (landmark accuracy >= 0.5)."""
+    from corr_core.correspondence.dense.init import hypotheses_to_refine
+    from corr_core.correspondence.dense.refine import BestMap
+
+    n = hypotheses_to_refine(rows)
+    best = BestMap(np.zeros(0, dtype=np.int64), int(np.argmin([r["distortion"] for r in rows[:n]])),
+                   tuple(r["distortion"] for r in rows[:n]))
+    kept = rows[best.index]
+    return {"refined": n, "kept": best.index, "confidence": best.confidence, "margin": best.margin,
+            "right": kept["landmark_accuracy"] >= 0.5, "mean_error": kept["mean_error"]}
+
+
+def _targets(root: str, decimated: bool):
+    """(name, V, F, truth (n_template,) int) of every test mesh of a generated dataset."""
+    from corr_core.geometry.mesh_io import load_mesh
+
+    for path in sorted(glob.glob(os.path.join(root, "meshes", "test", "*.obj"))):
+        name = os.path.splitext(os.path.basename(path))[0]
+        V, F = load_mesh(path)
+        gt = os.path.join(root, "ground_truth", f"{name}.txt")
+        truth = np.loadtxt(gt, dtype=np.int64) if os.path.isfile(gt) else np.arange(len(V))
+        if decimated or not os.path.isfile(gt):
+            yield name, V, F, truth
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seeds", default="0-9")
+    ap.add_argument("--poses", type=int, default=6)
+    ap.add_argument("--candidates", type=int, default=4, help="starting maps refined per target (all scored)")
+    ap.add_argument("--decimated", action="store_true", help="also a decimated, shuffled copy of pose 1")
+    ap.add_argument("--work", default=None, help="folder for the generated data (default: a temporary one)")
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args(argv)
+
+    from corr_core.correspondence.dense import basis
+    from corr_core.correspondence.landmarks import read_landmarks
+    from corr_core.generate.humanoid import write_humanoid_dataset
+    from corr_core.geometry.mesh_io import load_mesh
+
+    work = args.work or tempfile.mkdtemp(prefix="dense_hypotheses_")
+    results = []
+    for seed in _seed_range(args.seeds):
+        root = os.path.join(work, f"bodies_seed{seed}")
+        if not os.path.isdir(root):
+            write_humanoid_dataset(root, n_poses=args.poses, seed=seed, vary_bodies=True,
+                                   remeshed=("decimated",) if args.decimated else ())
+        V_s, F_s = load_mesh(os.path.join(root, "meshes", "template", "mesh000.obj"))
+        landmarks, _ = read_landmarks(os.path.join(root, "landmark_vids.txt"), n_vertices=len(V_s))
+        S = basis.mesh_basis(V_s, F_s, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
+        S.sample_distances(SETTINGS["n_patches"])
+        for name, V_t, F_t, truth in _targets(root, args.decimated):
+            T = basis.mesh_basis(V_t, F_t, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
+            rows = score_candidates(S, T, V_t, F_t, truth, landmarks, args.candidates)
+            c = choice(rows)
+            results.append({"seed": seed, "mesh": name, "n_vertices": len(V_t), "candidates": rows, **c})
+            cells = "  ".join(f"[{i}] chir {r['chirality']:.2f} wks {r['wks']:.4f} dist {r['distortion']:.4f} "
+                              f"err {r['mean_error']:.4f} acc {r['landmark_accuracy']:.2f}"
+                              for i, r in enumerate(rows))
+            print(f"seed {seed} {name} ({len(V_t)} v): refined {c['refined']}, kept [{c['kept']}] "
+                  f"{'right' if c['right'] else 'FLIPPED'}, confidence {c['confidence']:.2f} "
+                  f"(margin {c['margin']:.3f})  |  {cells}", flush=True)
+            if args.json:
+                with open(args.json, "w") as fh:
+                    json.dump(results, fh, indent=1)
+    right = [r for r in results if r["right"]]
+    wrong = [r for r in results if not r["right"]]
+    flipped = ", ".join(f"seed {r['seed']} {r['mesh']}" for r in wrong) or "none"
+    print(f"\n{len(results)} targets, seeds {args.seeds}: {len(wrong)} flipped ({flipped}); mean error of the kept "
+          f"maps {np.mean([r['mean_error'] for r in results]):.4f}")
+    if right:
+        margins = sorted(r["margin"] for r in right)
+        print(f"right choices: margin min {margins[0]:.3f}, 10th percentile {np.percentile(margins, 10):.3f}, "
+              f"median {np.median(margins):.3f}; confidence < 0.5 on {sum(r['confidence'] < 0.5 for r in right)} "
+              f"of {len(right)}")
+    if wrong:
+        print("flipped choices: confidence " + ", ".join(f"{r['confidence']:.2f}" for r in wrong))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
