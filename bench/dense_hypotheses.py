@@ -12,6 +12,7 @@ accuracy (< 0.5: a flipped map). The summary: targets, flips of the map ``refine
 hypotheses ``hypotheses_to_refine`` selects, its confidence, and the smallest margin of a right choice.
 
 Run:  python bench/dense_hypotheses.py [--seeds 0-9] [--poses 6] [--decimated] [--json OUT]
+      (an existing --json file is resumed: its targets are not run again, and the summary covers all of them)
 """
 from __future__ import annotations
 
@@ -110,6 +111,10 @@ def main(argv=None) -> int:
 
     work = args.work or tempfile.mkdtemp(prefix="dense_hypotheses_")
     results = []
+    if args.json and os.path.isfile(args.json):               # resume: targets already in the file are kept
+        with open(args.json) as fh:
+            results = json.load(fh)
+    done = {(r["seed"], r["mesh"]) for r in results}
     for seed in _seed_range(args.seeds):
         root = os.path.join(work, f"bodies_seed{seed}")
         if not os.path.isdir(root):
@@ -120,6 +125,8 @@ def main(argv=None) -> int:
         S = basis.mesh_basis(V_s, F_s, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
         S.sample_distances(SETTINGS["n_patches"])
         for name, V_t, F_t, truth in _targets(root, args.decimated):
+            if (seed, name) in done:
+                continue
             T = basis.mesh_basis(V_t, F_t, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
             rows = score_candidates(S, T, V_t, F_t, truth, landmarks, args.candidates)
             c = choice(rows)
