@@ -41,8 +41,9 @@ CHIRALITY_POOL = 2 / 3          # candidates kept: chirality agreement above thi
 # How many ranked initial maps the automatic mode refines (``hypotheses_to_refine``): always the best two (the
 # second is the reference of the map's confidence, ``refine.BestMap``), and any further candidate of the chirality
 # pool whose WKS disagreement is within HYPOTHESIS_WKS_RATIO of the best's, up to MAX_HYPOTHESES. On generated
-# bodies (`python /tmp/exp/hyp.py bodies SEED`, seeds 0-9, in docs/dense.md) the true map and its 180-degree turn
-# are within 1.06x of each other; twists (a limb pair swapped) are outside the pool.
+# bodies (`python bench/dense_hypotheses.py --seeds 0-9 --candidates 2`, docs/dense.md "Confidence") the
+# runner-up's WKS was within 1.09x of the best's (a judged ratio just above that; twists, a limb pair swapped,
+# are outside the chirality pool).
 MIN_HYPOTHESES = 2
 MAX_HYPOTHESES = 3
 HYPOTHESIS_WKS_RATIO = 1.10
