@@ -342,7 +342,7 @@ def best_with_points(source: MeshBasis, target: MeshBasis, maps: list, points_so
 
 # The distortion margin at which a kept map counts as sure (confidence 1): the runner-up hypothesis refined to a
 # map this much (relative) more distorted. On generated bodies (`python bench/dense_hypotheses.py --seeds 0-9
-# --candidates 2`, docs/dense.md "Confidence") the kept map beat the runner-up by a median 0.24 (least 0.046), and
+# --candidates 2`, docs/dense.md "Confidence") the kept map beat the runner-up by a median 0.25 (least 0.046), and
 # was never the wrong one: a judged value below most margins, so a sure choice reads 1 and a tie 0.
 CONFIDENT_MARGIN = 0.10
 LOW_CONFIDENCE = 0.5     # below this a map is reported for a look (half the margin of a sure choice)
