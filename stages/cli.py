@@ -36,7 +36,7 @@ def _workers(text: str) -> int:
 def _output_file(example: str):
     """An argparse type for a file to write (--summary-json, report --out): not an existing folder."""
     def check(text: str) -> str:
-        from .store import expand_path
+        from .cache_root import expand_path
         try:
             text = expand_path(text)  # ~ and $VAR, as a shell would
         except ValueError as exc:

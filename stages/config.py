@@ -28,8 +28,8 @@ from typing import Any
 import yaml
 
 from . import registry
+from .cache_root import cache_location, expand_path
 from .errors import PipelineError, UserError, warn_once
-from .store import cache_location, expand_path
 
 TOP_KEYS = {"name", "description", "cache", "output", "params", "generated", "datasets", "stages"}
 STAGE_KEYS = {"function", "foreach", "pairs", "tile", "candidates", "inputs", "params", "metrics", "description"}

@@ -22,13 +22,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import fingerprint, registry, select
+from .cache import open_store
+from .checksums import digest_bytes, digest_json, file_checksum, read_checked_json, write_checked_json
 from .config import DatasetSpec, GeneratedPath, InputRef, Pipeline, StageSpec, load_pipeline
 from .errors import CorruptEntry, PipelineError, warn_once
 from .fingerprint import code_fingerprint
 from .generated import resolve_generated
 from .inputs import (DictInput, EntryInput, IndexPairsInput, InputSpec, PairsInput, SparsePairsInput, StackInput,
                      ValueInput)
-from .store import Store, digest_bytes, digest_json, file_checksum, read_checked_json, write_checked_json
+from .store import Store
 
 KEY_VERSION = 1
 
@@ -181,7 +183,7 @@ def build_plan(pipe: Pipeline) -> Plan:
     """Resolve generated data and datasets, then compute every task and its key. Reads only: runs no
     generator and writes no file (not even the caches; see :meth:`Plan.save_caches`); planning prints nothing
     (problems are errors or one-time warnings)."""
-    store = Store(pipe.cache_dir)  # not claimed here: planning writes nothing (run.prepare claims it)
+    store = open_store(pipe.cache_dir)  # not claimed here: planning writes nothing (run.prepare claims it)
     fingerprint.use_disk_cache(os.path.join(store.root, "fingerprints.json"))
     hasher = FileHasher(store)
     pipe, pending = resolve_generated(pipe, store, hasher.digest)

@@ -18,7 +18,7 @@ from .results import metrics, scalar_metrics
 from .run import generated_names, prepare
 from .session import client_session, stderr_log
 from .status import dry_run, format_dry_run
-from .store import digest_json, write_checked_json
+from .checksums import digest_json, write_checked_json
 
 
 def parse_grid(grids: list[str]) -> list[list[str]]:
