@@ -17,9 +17,10 @@ import numpy as np
 
 from . import audit, registry
 from .cache import open_store
-from .errors import CorruptEntry, configure_logging
+from .errors import CorruptEntry
 from .inputs import (DictInput, InputError, InputSpec, PairsInput, SparsePairsInput, StackInput, ValueInput,
                      partial_pairs, partial_tile)
+from .logs import configure_logging
 from .store import Store
 
 
