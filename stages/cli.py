@@ -6,7 +6,8 @@ import json
 import os
 import sys
 
-from .errors import PipelineError, UserError, configure_logging
+from .errors import PipelineError, UserError
+from .logs import configure_logging
 
 MAX_WORKERS = 4 * (os.cpu_count() or 1)
 
@@ -36,7 +37,7 @@ def _workers(text: str) -> int:
 def _output_file(example: str):
     """An argparse type for a file to write (--summary-json, report --out): not an existing folder."""
     def check(text: str) -> str:
-        from .store import expand_path
+        from .cache_root import expand_path
         try:
             text = expand_path(text)  # ~ and $VAR, as a shell would
         except ValueError as exc:
@@ -255,7 +256,8 @@ def _dispatch(args) -> int:
             for stage, items in m.get("_left_out", {}).items():
                 print(f"{stage} left out {len(items)} failed item(s): "
                       + "; ".join(f"{x['item']}: {x['why']}" for x in items)[:500])
-            from .results import format_results, headline_first
+            from .headline import headline_first
+            from .results import format_results
 
             pairs, n_headline = headline_first(plan, m)
             if pairs:

@@ -37,6 +37,8 @@ import textwrap
 import types
 from typing import Any
 
+from .checksums import read_checked_json, write_checked_json
+
 
 def _module_name(obj: Any) -> str | None:
     """The name of the module that defines ``obj`` (or of ``obj`` itself when it is a module)."""
@@ -78,8 +80,6 @@ def use_disk_cache(path: str) -> None:
     object's name and line: a no-op run then parses no source at all."""
     if _DISK["path"] == path:
         return
-    from .store import read_checked_json
-
     _DISK.update(path=path, dirty=False)
     table = read_checked_json(path, "fingerprinting the code again", default={})
     _DISK["table"] = {k: v for k, v in table.items() if isinstance(k, str)}
@@ -87,8 +87,6 @@ def use_disk_cache(path: str) -> None:
 
 def save_disk_cache() -> None:
     """Write the digest cache if it changed (atomically)."""
-    from .store import write_checked_json
-
     if _DISK["path"] and _DISK["dirty"]:
         try:
             write_checked_json(_DISK["path"], _DISK["table"])

@@ -4,11 +4,15 @@ from __future__ import annotations
 
 import os
 
+from .cache import open_store
+from .cache_root import CACHE_MARKER, KEY_PATTERN, cache_location
+from .checksums import read_checked_json
 from .errors import UserError
 from .execute import clean_tmp
 from .plan import plan_pipeline
 from .record import legacy_pipeline_id, owners, pipeline_id, sweep_record_files
-from .store import CACHE_MARKER, KEY_PATTERN, SEAL_NAME, Store, _disk_usage, cache_location, read_checked_json
+from .seal import SEAL_NAME
+from .store import disk_usage
 from .sweep import parse_grid
 
 
@@ -41,7 +45,7 @@ def gc(paths: list[str], cache_dir: str | None = None, dry: bool = False, keep_s
         generated_keep |= {os.path.basename(g.path) for g in plan.pipeline.generated.values()}
         if keep_sweeps:
             reachable |= _sweep_keys(p, plan, cache_dir)
-    store = store or Store(cache_location(cache_dir or "cache"))
+    store = store or open_store(cache_location(cache_dir or "cache"))
     empty = {"kept": 0, "removed": 0, "generated_removed": 0, "bytes_freed": 0, "dry_run": dry, "entries": [],
              "generated": [], "others_kept": 0}
     if not store.exists():
@@ -128,8 +132,3 @@ def _only_mine(pids: list[str], mine: set[str]) -> bool:
 def _labels(pids: list[str], known: dict) -> list[str]:
     """The pipelines of an entry as ``name (file)``, or ["no recorded pipeline"]."""
     return sorted({known[p].label for p in pids}) or ["no recorded pipeline"]
-
-
-def disk_usage(path: str) -> int:
-    """Bytes of all files under the local folder ``path`` (0 if it does not exist)."""
-    return _disk_usage(path)

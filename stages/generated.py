@@ -18,7 +18,10 @@ from typing import Any, Callable
 from . import audit, registry
 from .config import GeneratedPath, GeneratedSpec, Pipeline
 from .fingerprint import code_fingerprint
-from .store import Store, check_folder, digest_json, seal_folder, warn_once
+from .checksums import digest_json
+from .errors import warn_once
+from .seal import check_folder, seal_folder
+from .store import Store
 
 KEY_VERSION = 1
 

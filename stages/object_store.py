@@ -39,9 +39,12 @@ from typing import Any
 import numpy as np
 
 from .errors import CorruptEntry, UserError, warn_once
-from .store import (CACHE_MARKER, FORMAT_VERSION, KEY_PATTERN, _CACHE_NAMES, _READ_CACHE, _TOO_DEEP, Store, _chunks_for,
-                    _copy_arrays, _decode, _encode, _fill_value, _json_default, _manifest_problem, array_checksum,
-                    claim_folder, file_checksum, manifest_checksum, read_checked_arrays, same_content)
+from .cache_root import CACHE_MARKER, CACHE_NAMES, KEY_PATTERN, claim_folder
+from .checksums import file_checksum, json_default, parse_json
+from .codec import copy_arrays, decode, encode, read_checked_arrays, write_array
+from .manifest import FORMAT_VERSION, manifest_checksum, manifest_problem, same_content
+from .read_cache import READ_CACHE
+from .store import Store
 
 # a write under objects/ that no manifest names and that is younger than this may belong to a task still
 # running (its manifest comes last): gc leaves it alone
@@ -175,7 +178,7 @@ class ObjectStore(Store):
         try:
             if self.is_marked():
                 return
-            foreign = [n for n in self._top_names() if n not in _CACHE_NAMES and not n.startswith(".")]
+            foreign = [n for n in self._top_names() if n not in CACHE_NAMES and not n.startswith(".")]
         except UserError:
             raise
         except OSError as exc:
@@ -222,15 +225,9 @@ class ObjectStore(Store):
             return None
         except OSError as exc:
             raise self._unreachable(exc, "read") from None
-        try:
-            doc = json.loads(data.decode("utf-8"))
-            problem = _manifest_problem(doc, key)
-        except UnicodeDecodeError:
-            doc, problem = None, "is not UTF-8 text (overwritten or damaged)"
-        except ValueError:
-            doc, problem = None, "is not valid JSON (truncated or edited)"
-        except RecursionError:
-            doc, problem = None, _TOO_DEEP
+        doc, problem = parse_json(data)
+        if problem is None:
+            problem = manifest_problem(doc, key)
         if problem is None and not (isinstance(doc.get("location"), str) and KEY_PATTERN.match(doc["location"])):
             problem = "names no data location (not written for an object store)"
         if problem is not None:
@@ -284,7 +281,7 @@ class ObjectStore(Store):
 
     def invalidate(self, key: str) -> None:
         """Forget an entry (delete its manifest); its data is left to ``gc`` (:meth:`stale_writes`)."""
-        _READ_CACHE.drop(key)
+        READ_CACHE.drop(key)
         try:
             self.fs.rm_file(self._manifest_key(key))
         except FileNotFoundError:
@@ -297,23 +294,14 @@ class ObjectStore(Store):
         Data first, under this writer's own prefix; the manifest last, create-only. Returns the manifest of
         the entry as stored: this one, or the one of a run that stored the same key first.
         """
-        import zarr
-
         arrays: dict[str, np.ndarray] = {}
-        tree = _encode(value, arrays)
+        tree = encode(value, arrays)
         writer = uuid.uuid4().hex
         data = self._data(key, writer)
         try:
             checksums = {}
             for name, arr in arrays.items():
-                arr = np.ascontiguousarray(arr)
-                store = self._zarr_store(f"{data}/{name}.zarr", read_only=False)
-                if arr.size:
-                    zarr.create_array(store=store, data=arr, chunks=_chunks_for(arr), fill_value=_fill_value(arr.dtype))
-                else:
-                    zarr.create_array(store=store, shape=arr.shape, dtype=arr.dtype,
-                                      chunks=tuple(max(1, c) for c in arr.shape), fill_value=_fill_value(arr.dtype))
-                checksums[name] = {"sha": array_checksum(arr), "shape": list(arr.shape), "dtype": str(arr.dtype)}
+                checksums[name] = write_array(self._zarr_store(f"{data}/{name}.zarr", read_only=False), arr)
             files = {}
             if files_dir and os.path.isdir(files_dir):
                 for dirpath, _, filenames in os.walk(files_dir):
@@ -324,7 +312,7 @@ class ObjectStore(Store):
                         self.fs.put_file(full, f"{data}/files/{rel.replace(os.sep, '/')}")
             manifest = {"format": FORMAT_VERSION, "key": key, "created": time.time(), "tree": tree,
                         "arrays": checksums, "files": files, "info": info or {}, "location": writer}
-            manifest = json.loads(json.dumps(manifest, default=_json_default))  # the form a reader sees
+            manifest = json.loads(json.dumps(manifest, default=json_default))  # the form a reader sees
             manifest["checksum"] = manifest_checksum(manifest)
             return self._commit(key, manifest)
         except BaseException as exc:
@@ -370,9 +358,9 @@ class ObjectStore(Store):
         if manifest is None:
             raise CorruptEntry(key, "manifest missing or unreadable")
         signature = ("object-store", manifest["checksum"])  # names the writer: its data is never rewritten
-        cached = _READ_CACHE.get(key)
+        cached = READ_CACHE.get(key)
         if cached is not None and cached[1] == signature:
-            return _copy_arrays(cached[0])
+            return copy_arrays(cached[0])
         data = self._data(key, manifest["location"])
         try:
             arrays = read_checked_arrays(key, manifest["arrays"], verify,
@@ -382,9 +370,9 @@ class ObjectStore(Store):
             if _access_problem(exc) is not None:  # the server went away: not a reason to recompute the entry
                 raise self._unreachable(exc, "read") from None
             raise
-        value = _decode(manifest["tree"], arrays)
-        _READ_CACHE.put(key, (value, signature), sum(a.nbytes for a in arrays.values()))
-        return _copy_arrays(value)
+        value = decode(manifest["tree"], arrays)
+        READ_CACHE.put(key, (value, signature), sum(a.nbytes for a in arrays.values()))
+        return copy_arrays(value)
 
     def verify_files(self, key: str) -> dict[str, str]:
         """{relative path: local copy} of the entry's files, each checked against its checksum; a local copy
@@ -514,12 +502,6 @@ class _Translated:
 
 
 _WRITES = {"pipe_file", "put_file", "rm", "rm_file", "mkdir", "makedirs", "touch"}
-
-
-def _same_content(a: dict, b: dict) -> bool:
-    """True when two manifests of one key hold the same value: arrays, files, inline tree, and left-out items."""
-    return (all(a[f] == b[f] for f in ("tree", "arrays", "files"))
-            and a["info"].get("left_out", []) == b["info"].get("left_out", []))
 
 
 def _mtime(info: dict) -> float:

@@ -17,7 +17,7 @@ import uuid
 from . import registry
 from .errors import CorruptEntry, UserError, warn_once
 from .plan import Plan
-from .store import file_checksum, read_checked_json, write_checked_json
+from .checksums import file_checksum, read_checked_json, write_checked_json
 
 PUBLISHED_NAME = ".stages-published.json"
 

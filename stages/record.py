@@ -16,7 +16,7 @@ from typing import Any
 
 from .config import Pipeline
 from .plan import Plan, SourceKind, Task
-from .store import digest_json, read_checked_json, write_checked_json
+from .checksums import digest_json, read_checked_json, write_checked_json
 
 
 def pipeline_id(plan: "Plan | Pipeline") -> str:

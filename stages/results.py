@@ -65,17 +65,6 @@ def scalar_metrics(m: dict, prefix: str = "") -> dict[str, Any]:
     return out
 
 
-def headline_first(plan: Plan, m: dict) -> tuple[list[tuple[str, Any]], int]:
-    """``scalar_metrics(m)`` as (key, value) pairs: the keys the plugins' headline tables read first, in the
-    tables' order (table by table, row by row, measure by measure: the report's summary), then the others in
-    their stored order; and how many are headline keys."""
-    from .report.headline import key_directions
-
-    flat = scalar_metrics(m)
-    head = [k for k in key_directions(plan, m) if k in flat]
-    return [(k, flat[k]) for k in head] + [(k, v) for k, v in flat.items() if k not in set(head)], len(head)
-
-
 def format_results(pairs: list[tuple[str, Any]], n_headline: int | None = None) -> str:
     """One ``key value`` line per metric (floats to 4 significant digits); a key holding a space is quoted
     (JSON string), so each line stays two fields; a blank line after the first ``n_headline`` lines."""

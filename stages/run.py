@@ -21,7 +21,7 @@ from .record import build_record, load_record, note_keys, save_record
 from .results import metrics
 from .session import client_session, given_client, stderr_log
 from .status import dry_run, format_dry_run
-from .store import atomic_write_text
+from .checksums import atomic_write_text
 from .worker import TaskResult, TaskStatus
 
 

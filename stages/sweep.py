@@ -11,6 +11,7 @@ import time
 
 from .errors import PipelineError
 from .execute import execute_rounds
+from .headline import best_indices, key_directions, sweep_columns
 from .plan import plan_pipeline
 from .publish import write_output_file
 from .record import note_keys, pipeline_id
@@ -18,7 +19,7 @@ from .results import metrics, scalar_metrics
 from .run import generated_names, prepare
 from .session import client_session, stderr_log
 from .status import dry_run, format_dry_run
-from .store import digest_json, write_checked_json
+from .checksums import digest_json, write_checked_json
 
 
 def parse_grid(grids: list[str]) -> list[list[str]]:
@@ -175,7 +176,6 @@ def headline_columns(plan, rows: list[dict], requested: list[str] | None = None)
 
     ``requested``: keys or glob patterns (``--metrics``); default: the plugins' ``sweep_metrics``, else the
     cells of their headline tables. Raises PipelineError for a requested key no grid point has."""
-    from .report.headline import key_directions, sweep_columns
 
     merged: dict = {}
     for r in rows:
@@ -219,7 +219,6 @@ def format_table(rows: list[dict], headline: dict | None = None, width: int | No
     flat = [scalar_metrics(r["metrics"]) for r in rows]
     cols_m = list((headline or {}).get("columns") or dict.fromkeys(k for f in flat for k in f))
     better = (headline or {}).get("better", {})
-    from .report.headline import best_indices
 
     columns = []
     for c in cols_m:

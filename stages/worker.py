@@ -16,9 +16,11 @@ from typing import Any
 import numpy as np
 
 from . import audit, registry
-from .errors import CorruptEntry, configure_logging
+from .cache import open_store
+from .errors import CorruptEntry
 from .inputs import (DictInput, InputError, InputSpec, PairsInput, SparsePairsInput, StackInput, ValueInput,
                      partial_pairs, partial_tile)
+from .logs import configure_logging
 from .store import Store
 
 
@@ -171,7 +173,7 @@ def run_task(call: TaskCall, *upstream: TaskResult) -> TaskResult:
     except _Skip as skip:
         return base.with_status(TaskStatus.SKIPPED, because=skip.because, error=skip.error)
     failed = {u.key: u for u in upstream if isinstance(u, TaskResult) and not u.status.succeeded}
-    store = Store(call.cache, warn=False)  # the client warns about unusable entries
+    store = open_store(call.cache, warn=False)  # the client warns about unusable entries
     if not call.force and store.has(call.key):
         stored = tuple(tuple(e) for e in store.left_out(call.key))
         if stored == left_out:  # complete, or left out the same items as now

@@ -19,7 +19,7 @@ from __future__ import annotations
 import os
 
 from .. import registry
-from ..store import atomic_write_text
+from ..checksums import atomic_write_text
 from .context import ReportContext, build_context
 from .markup import CSS, esc, folded, render_value, when
 from .provenance import provenance_section

@@ -7,13 +7,13 @@ import time
 from dataclasses import dataclass, field
 from typing import Iterable
 
+from ..headline import HeadlineTable, headline_tables
 from ..plan import Plan, plan_pipeline
 from ..record import load_record, sweep_record_files
 from ..results import metrics as pipeline_metrics
-from ..store import read_checked_json
-from .headline import HeadlineTable, headline_tables
+from ..checksums import read_checked_json
 from .markup import IMAGE_TYPES
-from .provenance import git_commit, package_versions
+from .versions import git_commit, package_versions
 
 
 @dataclass

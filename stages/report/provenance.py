@@ -3,49 +3,15 @@ versions (the engine's and those the application's plugins declare) and the git 
 from __future__ import annotations
 
 import hashlib
-import importlib.metadata
 import os
 import platform
-import subprocess
 import sys
-from typing import TYPE_CHECKING
 
-from .. import registry
-from ..plan import Plan
+from .context import ReportContext
 from .markup import esc, folded, json_pre, table, when
 
-if TYPE_CHECKING:
-    from .context import ReportContext
 
-ENGINE_PACKAGES = ("numpy", "dask", "distributed", "zarr", "pyyaml")
-
-
-def package_versions(plan: Plan | None = None) -> dict[str, str]:
-    """Python and package versions: the engine's dependencies, then the packages declared by the plugins
-    that registered the plan's functions (all loaded plugins when ``plan`` is None)."""
-    functions = [sp.spec.function for sp in plan.stages.values()] if plan is not None else None
-    names = list(ENGINE_PACKAGES)
-    for plugin in registry.plugins(functions):
-        names += [n for n in plugin.report_packages if n not in names]
-    out = {"python": platform.python_version()}
-    for name in names:
-        try:
-            out[name] = importlib.metadata.version(name)
-        except importlib.metadata.PackageNotFoundError:
-            out[name] = "not installed"
-    return out
-
-
-def git_commit(folder: str) -> str | None:
-    """``git rev-parse HEAD`` in ``folder``, or None outside a git checkout."""
-    try:
-        res = subprocess.run(["git", "rev-parse", "HEAD"], cwd=folder, capture_output=True, text=True, timeout=5)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return res.stdout.strip() if res.returncode == 0 else None
-
-
-def _stage_rows(ctx: "ReportContext") -> list[list]:
+def _stage_rows(ctx: ReportContext) -> list[list]:
     plan, record = ctx.plan, ctx.record
     last = (record or {}).get("summary", {}).get("stages", {})
     rec_stages = (record or {}).get("stages", {})
@@ -71,7 +37,7 @@ def _pipeline_file_block(path: str) -> str:
     return folded(f"pipeline file {os.path.basename(path)} (blake2b {digest})", f"<pre>{esc(text)}</pre>")
 
 
-def provenance_section(ctx: "ReportContext") -> str:
+def provenance_section(ctx: ReportContext) -> str:
     """Stages (counts of the last run, fingerprints), parameters and code parts, the pipeline file, environment."""
     plan, record = ctx.plan, ctx.record
     parts = ["<h3>Stages</h3>"]

@@ -4,9 +4,10 @@ from __future__ import annotations
 import os
 from urllib.parse import quote
 
+from ..headline import HeadlineTable, best_indices
 from ..results import scalar_metrics
+from ..sweep import headline_columns
 from .context import ReportContext, caption_file
-from .headline import HeadlineTable, best_indices
 from .markup import (anchor, data_uri, esc, folded, format_value, human_size, is_scalar, render_value, scroll_box,
                      table, when)
 
@@ -252,7 +253,6 @@ def _sweep_headline(ctx: ReportContext, sw: dict) -> dict:
     """The headline columns of a recorded sweep (as ``sweep`` printed them; computed for older records)."""
     if sw.get("headline", {}).get("columns"):
         return sw["headline"]
-    from ..sweep import headline_columns
     try:
         return headline_columns(ctx.plan, sw.get("rows", []))
     except Exception:  # an unreadable old record: show every column

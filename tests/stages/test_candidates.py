@@ -16,10 +16,11 @@ import numpy as np
 import pytest
 
 from stages import api
+from stages.candidates import candidate_pairs
 from stages.config import load_pipeline
 from stages.errors import PipelineError, UserError
 from stages.execute import execute
-from stages.plan import build_plan, candidate_pairs, plan_pipeline
+from stages.plan import build_plan, plan_pipeline
 
 from tests.helpers import cli, executed, loaded_plugin, make_project
 from tests.stages import synthetic_plugin as synthetic

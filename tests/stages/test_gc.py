@@ -94,7 +94,7 @@ import time  # noqa: E402
 import uuid  # noqa: E402
 
 from stages.errors import UserError  # noqa: E402
-from stages.store import CACHE_MARKER  # noqa: E402
+from stages.cache_root import CACHE_MARKER  # noqa: E402
 
 from tests.helpers import run_quiet  # noqa: E402
 

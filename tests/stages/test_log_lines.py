@@ -11,7 +11,7 @@ SCRIPT = textwrap.dedent("""
     import warnings
     import numpy as np
     from corr_core.geometry.repair import repair_mesh, warn_repairs
-    from stages.errors import configure_logging
+    from stages.logs import configure_logging
 
     configure_logging()
     configure_logging()                       # idempotent: still one line per message
@@ -43,7 +43,7 @@ WORKER_SCRIPT = textwrap.dedent("""
 
     def task():
         import numpy as np
-        from stages.errors import configure_logging
+        from stages.logs import configure_logging
         from stages.worker import _in_dask_worker
         from corr_core.geometry.repair import repair_mesh, warn_repairs
         if _in_dask_worker():                  # as run_task does

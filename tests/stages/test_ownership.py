@@ -12,7 +12,7 @@ import pytest
 from stages import api
 from stages.errors import UserError
 from stages.publish import PUBLISHED_NAME
-from stages.store import CACHE_MARKER
+from stages.cache_root import CACHE_MARKER
 
 from tests.helpers import SYNTHETIC_YAML, cli, make_project, run_quiet
 
@@ -256,7 +256,7 @@ def test_metrics_json_under_a_record_of_an_older_engine_is_still_updated(project
     and report.html beside it were written by the engine (it always did), so they are still replaced."""
     out = tmp_path / "results" / "syn"
     run_quiet(project)
-    from stages.store import write_checked_json
+    from stages.checksums import write_checked_json
     write_checked_json(str(out / PUBLISHED_NAME), {"stages": {"rep": ["rep/summary.txt"]}})
     (out / "metrics.json").write_text('{"old": 1}')
     run_quiet(project, overrides=["sigma=2.0"])

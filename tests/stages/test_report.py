@@ -359,7 +359,7 @@ def test_report_summary_first(project, tmp_path):
 
 
 def test_best_indices_and_headline_marks():
-    from stages.report.headline import best_indices
+    from stages.headline import best_indices
     assert best_indices([0.5, None, 0.9, 0.9], "max") == {2, 3}
     assert best_indices([0.5, 0.2, float("nan")], "min") == {1}
     assert best_indices([0.5, 0.2], None) == set()

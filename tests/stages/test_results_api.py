@@ -7,7 +7,8 @@ import pytest
 
 from stages import api
 from stages.errors import UserError
-from stages.results import format_results, headline_first
+from stages.headline import headline_first
+from stages.results import format_results
 
 from tests.helpers import ROOT, make_project, plugins_env, run_quiet
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from stages import api
-from stages.store import digest_json
+from stages.checksums import digest_json
 
 from tests.helpers import executed, make_project
 

@@ -23,7 +23,7 @@ pytest.importorskip("flask", reason="moto's server mode needs flask (pip install
 
 from stages import api  # noqa: E402
 from stages.errors import CorruptEntry, UserError  # noqa: E402
-from stages.store import Store  # noqa: E402
+from stages.cache import open_store  # noqa: E402
 
 from tests.helpers import SYNTHETIC_YAML, executed, free_port, make_project, plugins_env, run_quiet  # noqa: E402
 
@@ -136,7 +136,7 @@ def test_unusable_entries_are_recomputed_with_a_warning(project, s3fs_client, ca
     err = capsys.readouterr().err
     for damage in DAMAGES[1:]:
         assert f"cache entry {manifests[damage]}" in err, damage
-    store = Store(cache)
+    store = open_store(cache)
     assert all(store.has(t.key) for t in tasks)
 
 
@@ -144,10 +144,10 @@ def test_a_changed_array_fails_its_checksum(project, s3fs_client):
     path, cache = project
     run_quiet(path, cache_dir=cache)
     key = _feat_key(path, cache)
-    store = Store(cache)
+    store = open_store(cache)
     good = store.get(key)
     writer = store.manifest(key)["location"]
-    from stages.store import _READ_CACHE
+    from stages.read_cache import READ_CACHE as _READ_CACHE
     import zarr
     arr = zarr.open_array(store=store._zarr_store(f"{store.object_path(key)}/{writer}/a0.zarr", read_only=False),
                           mode="r+", zarr_format=3)
@@ -177,7 +177,7 @@ def test_two_writers_of_one_entry_store_it_once(s3_endpoint, bucket, s3fs_client
     monkeypatch.setattr(ObjectStore, "_commit", commit_after_both)
     value = {"x": np.arange(12.0).reshape(3, 4), "n": 3}
     stored = []
-    threads = [threading.Thread(target=lambda: stored.append(Store(cache).put(key, value))) for _ in range(2)]
+    threads = [threading.Thread(target=lambda: stored.append(open_store(cache).put(key, value))) for _ in range(2)]
     for t in threads:
         t.start()
     for t in threads:
@@ -185,7 +185,7 @@ def test_two_writers_of_one_entry_store_it_once(s3_endpoint, bucket, s3fs_client
     assert len(stored) == 2 and stored[0]["location"] == stored[1]["location"]  # both report the same entry
     writers = s3fs_client.ls(f"{cache}/objects/ab/{key}", detail=False)
     assert [w.rsplit("/", 1)[-1] for w in writers] == [stored[0]["location"]]  # the loser's data is gone
-    store = Store(cache)
+    store = open_store(cache)
     assert store.has(key)
     got = store.get(key)
     np.testing.assert_array_equal(got["x"], value["x"])
@@ -196,7 +196,7 @@ def test_a_result_with_other_content_replaces_the_stored_one(s3_endpoint, bucket
     """A result stored without some failed items is replaced when they are retried and it is computed again
     (same key, other content); a second write of the same content keeps the first copy."""
     monkeypatch.setenv("STAGES_LOCAL_CACHE", str(tmp_path / "local"))
-    store, key = Store(f"s3://{bucket}/c"), "cd" + "1" * 30
+    store, key = open_store(f"s3://{bucket}/c"), "cd" + "1" * 30
     partial = store.put(key, {"x": np.zeros(2)}, info={"left_out": [["k", "feat", "s001", "failed"]]})
     assert store.put(key, {"x": np.zeros(2)}, info={"left_out": [["k", "feat", "s001", "failed"]]})["location"] \
         == partial["location"]
@@ -251,7 +251,7 @@ def test_two_concurrent_runs_into_one_bucket(tmp_path, bucket, s3_endpoint, s3fs
             == (tmp_path / "out1" / "rep" / "summary.txt").read_bytes())
     from stages import registry
     registry.load_plugin("tests.stages.race_plugin")  # to plan it here too
-    store = Store(cache)
+    store = open_store(cache)
     plan = api.plan_pipeline(str(path), cache_dir=cache, quiet=True)
     for t in plan.tasks():  # every entry complete, and exactly one writer's data kept for it
         assert store.has(t.key)
@@ -267,7 +267,7 @@ def test_gc_on_s3(project, tmp_path, s3fs_client, monkeypatch):
     path, cache = project
     run_quiet(path, cache_dir=cache)
     run_quiet(path, cache_dir=cache, overrides=["sigma=2.0"])      # two more entries (summary, rep)
-    store = Store(cache)
+    store = open_store(cache)
     key = _feat_key(path, cache)
     old_writer = store.manifest(key)["location"]
     store.invalidate(key)
@@ -335,7 +335,7 @@ def test_the_report_names_the_cache_url_and_its_local_folder(project, tmp_path):
     run_quiet(path, cache_dir=cache)
     html = Path(write_report(str(path), cache_dir=cache)).read_text()
     rows = dict(re.findall(r"<tr><td>(cache[^<]*)</td><td>([^<]*)</td></tr>", html))
-    assert rows == {"cache": cache, "cache local folder": Store(cache).root}
+    assert rows == {"cache": cache, "cache local folder": open_store(cache).root}
     assert str(tmp_path / "local") in rows["cache local folder"]
 
 

@@ -141,7 +141,7 @@ def test_a_folder_given_for_an_output_file_is_a_usage_error(project, tmp_path, c
 
 
 def test_atomic_write_to_a_folder_leaves_no_tmp(tmp_path):
-    from stages.store import atomic_write_text
+    from stages.checksums import atomic_write_text
 
     with pytest.raises(IsADirectoryError):
         atomic_write_text(str(tmp_path), "x")

@@ -1,5 +1,7 @@
-"""Headline tables: the compact methods x measures tables the plugins declare (:class:`stages.registry.Headline`),
-filled from a configuration's metrics; shared by the report's summary and ``sweep``'s printed table.
+"""Headline tables: the methods x measures tables the plugins declare, filled from a configuration's metrics.
+
+The plugins declare them as :class:`stages.registry.Headline`; shared by the report's summary, ``sweep``'s printed
+table and the order in which ``results`` lists the metrics.
 
 Generic: everything application-specific (rows, measures, which is better, the figures that carry the result)
 comes from the plugin declarations; this module only resolves metric keys and marks the best value.
@@ -11,9 +13,9 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from .. import registry
-from ..plan import Plan
-from ..results import scalar_metrics
+from . import registry
+from .plan import Plan
+from .results import scalar_metrics
 
 SECONDS_PER_TASK = "@seconds_per_task"
 
@@ -155,3 +157,12 @@ def sweep_columns(plan: Plan, metrics: dict, requested: list[str] | None = None)
     for pat in patterns:
         out += [k for k in flat if fnmatch.fnmatchcase(k, pat) and k not in out]
     return out
+
+
+def headline_first(plan: Plan, m: dict) -> tuple[list[tuple[str, Any]], int]:
+    """``scalar_metrics(m)`` as (key, value) pairs: the keys the plugins' headline tables read first, in the
+    tables' order (table by table, row by row, measure by measure: the report's summary), then the others in
+    their stored order; and how many are headline keys."""
+    flat = scalar_metrics(m)
+    head = [k for k in key_directions(plan, m) if k in flat]
+    return [(k, flat[k]) for k in head] + [(k, v) for k, v in flat.items() if k not in set(head)], len(head)
