@@ -66,6 +66,91 @@ def cli(args: list[str], cwd: Path, env: dict | None = None, timeout: float = 30
                           text=True, timeout=timeout, **kw)
 
 
+def _fresh_process_state() -> None:
+    """Forget what the engine keeps per process, as a new ``python -m stages`` process starts without it: the
+    warnings said once, the code digests and the table of them read from a cache, validated manifests, decoded
+    entries. (The parsed source files stay: they are keyed by file, size and mtime.)"""
+    from stages import errors, fingerprint, store
+
+    errors._WARNED.clear()
+    fingerprint._MEMO.clear()
+    fingerprint._DISK.update(path=None, table={}, dirty=False)
+    store._MANIFESTS.clear()
+    store._READ_CACHE.items.clear()
+    store._READ_CACHE.bytes = 0
+
+
+def cli_main(args: list[str], cwd: Path, env: dict | None = None, timeout: float | None = None,
+             **kw) -> subprocess.CompletedProcess:
+    """``python -m stages ARGS`` run by the CLI's ``main`` in this process, as a new process would run it: in
+    ``cwd``, with ``env`` added to the environment, the engine's per-process state reset, Python warnings shown
+    as in a fresh interpreter, stdout and stderr captured, an uncaught exception printed as a traceback with exit
+    code 1, ``SystemExit`` (argparse) turned into its exit code. It saves the 2-4 s each subprocess pays for
+    importing dask, Open3D and the plugins.
+
+    For commands that plan, read, or compute with ``--workers 0``, where a test checks exit codes, messages and
+    files: not for process behaviour (a kill, Ctrl-C, dask workers), for code edited between two runs (the
+    modules are imported once here), or for plugins (``STAGES_PLUGINS``) this process has not loaded. Those
+    use :func:`cli` (a real subprocess); ``tests/stages/test_cli_in_process.py`` checks that both give the same
+    output.
+    ``timeout`` is accepted for symmetry with :func:`cli` (pytest-timeout bounds the test)."""
+    import io
+    import traceback
+    import warnings
+
+    from stages import cli as stages_cli
+    from stages import errors
+
+    env = {k: v for k, v in (env or {}).items() if k != "PYTHONPATH"}   # the modules are imported already
+    if "STAGES_PLUGINS" in env:
+        wanted, loaded = (set(filter(None, x.split(","))) for x in (env["STAGES_PLUGINS"],
+                                                                    os.environ.get("STAGES_PLUGINS", "")))
+        if not (wanted >= loaded and all(m.partition(":")[0] in sys.modules for m in wanted)):
+            raise ValueError("cli_main runs with the plugins this process loaded: use cli() for other plugins")
+    if "COLUMNS" not in env and "COLUMNS" not in os.environ:
+        env["COLUMNS"] = "80"   # what a process whose output is a pipe sees (shutil.get_terminal_size)
+    saved_env = {k: os.environ.get(k) for k in env}
+    saved_cwd = os.getcwd()
+    root = logging.getLogger()
+    saved_handlers, saved_level = root.handlers[:], root.level
+    saved_capture, saved_format = logging._warnings_showwarning, warnings.formatwarning
+    out, err = io.StringIO(), io.StringIO()
+    _fresh_process_state()
+    try:
+        os.environ.update(env)
+        os.chdir(cwd)
+        # the engine's reporter is installed anew, writing to this call's stderr
+        root.handlers = [h for h in root.handlers if not isinstance(h.formatter, errors._OneLine)]
+        logging._warnings_showwarning = None
+        with warnings.catch_warnings(), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            warnings.resetwarnings()            # the filters of a new interpreter (pytest records warnings)
+            for category in (ResourceWarning, ImportWarning, PendingDeprecationWarning, DeprecationWarning):
+                warnings.simplefilter("ignore", category)
+            warnings.filterwarnings("default", category=DeprecationWarning, module="__main__")
+            try:
+                code = stages_cli.main([str(a) for a in args])
+            except SystemExit as exc:
+                code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+                if isinstance(exc.code, str):
+                    print(exc.code, file=sys.stderr)
+            except BaseException:               # noqa: BLE001 - what the interpreter would print
+                traceback.print_exc()
+                code = 1
+            finally:
+                logging.captureWarnings(False)
+    finally:
+        root.handlers, root.level = saved_handlers, saved_level
+        logging._warnings_showwarning, warnings.formatwarning = saved_capture, saved_format
+        os.chdir(saved_cwd)
+        for k, v in saved_env.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+    return subprocess.CompletedProcess([sys.executable, "-m", "stages", *map(str, args)], code, out.getvalue(),
+                                       err.getvalue())
+
+
 def executed(summary: dict) -> dict[str, int]:
     return {name: s["executed"] for name, s in summary["stages"].items()}
 

@@ -2,8 +2,8 @@
 
 The audit (``stages.audit``, ``STAGES_AUDIT_CODE=1``) runs each task under ``sys.setprofile`` and fails it when a
 project function executed that its code fingerprint does not cover. The default pipeline is audited by
-``test_default_pipeline.py`` (its cold run has the audit on); here the course pipelines, on a few items each, so
-that every stage of ``pipelines/scape.yaml`` and ``pipelines/chairs.yaml`` runs at least once.
+``test_default_pipeline.py`` (its cold run, shared in conftest.py, has the audit on); here the course pipelines,
+on a few items each, so that every stage of ``pipelines/scape.yaml`` and ``pipelines/chairs.yaml`` runs at least once.
 """
 from __future__ import annotations
 
@@ -39,6 +39,7 @@ def _audited_run(tmp_path, pipeline: str, sets: list[str]) -> dict:
 
 @pytest.mark.course
 @pytest.mark.slow
+@pytest.mark.e2e
 def test_scape_pipeline_stages_run_only_fingerprinted_code(tmp_path):
     src = COURSE_DATA / "scape"
     data = tmp_path / "scape"
@@ -55,6 +56,7 @@ def test_scape_pipeline_stages_run_only_fingerprinted_code(tmp_path):
 
 
 @pytest.mark.course
+@pytest.mark.e2e
 def test_chairs_pipeline_stages_run_only_fingerprinted_code(tmp_path):
     views, meshes = tmp_path / "views", tmp_path / "meshes"
     views.mkdir()

@@ -1,14 +1,16 @@
-"""The one-command demo: `python -m stages run pipeline.yaml` on generated data, then the HTML report."""
+"""The one-command demo: `python -m stages run pipeline.yaml` on generated data, then the HTML report (the cold
+run is the session's shared audited run, ``default_cold_run`` in conftest.py)."""
 from __future__ import annotations
 
 import base64
 import json
 import os
-import shutil
 import subprocess
 import sys
 from html.parser import HTMLParser
 from pathlib import Path
+
+import pytest
 
 from tests.browser import browser_problem, check_page
 from tests.helpers import ROOT, cli
@@ -74,15 +76,12 @@ def test_readme_block_parser_reads_metric_lines():
     assert readme_results_lines(text) == [("a.b", "1"), ("c", "0.5")]
 
 
-def test_default_pipeline_and_report(tmp_path):
-    shutil.copy(ROOT / "pipeline.yaml", tmp_path / "pipeline.yaml")
-    # the cold run is audited: a project function that runs outside its task's code fingerprint fails the task
-    # (stages/audit.py; the course pipelines: tests/pipelines/test_code_audit.py)
-    res = cli(["run", "pipeline.yaml", "--summary-json", "s.json"], cwd=tmp_path, timeout=1200,
-              env={"STAGES_AUDIT_CODE": "1"})
+@pytest.mark.e2e
+def test_default_pipeline_and_report(default_cold_run):
+    res, tmp_path = default_cold_run.res, default_cold_run.folder      # the audited cold run (conftest.py)
     assert "code audit" not in res.stdout + res.stderr, (res.stdout + res.stderr)[-4000:]
     assert res.returncode == 0, res.stderr[-3000:]
-    summary = json.loads((tmp_path / "s.json").read_text())
+    summary = default_cold_run.summary
     assert all(s["failed"] == 0 for s in summary["stages"].values())
     metrics = json.loads(cli(["results", "pipeline.yaml", "--json"], cwd=tmp_path).stdout)
     _readme_block_matches(cli(["results", "pipeline.yaml"], cwd=tmp_path).stdout)

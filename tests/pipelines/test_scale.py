@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from tests.helpers import ROOT, ExternalCluster
 
 PIPELINE = ROOT / "pipelines" / "scale.yaml"
@@ -19,6 +21,7 @@ def _stages(args: list[str], cwd: Path, env: dict) -> subprocess.CompletedProces
                           text=True, timeout=120)
 
 
+@pytest.mark.e2e
 def test_scale_pipeline_on_an_external_dask_cluster(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     cache, out = tmp_path / "cache", tmp_path / "out"

@@ -11,7 +11,7 @@ import pytest
 from stages import api
 from stages.store import Store
 
-from tests.helpers import cli, executed, make_project, run_quiet
+from tests.helpers import cli_main, executed, make_project, run_quiet
 
 GENERATED_YAML = """\
 name: gen
@@ -84,17 +84,17 @@ def test_an_unreadable_manifest_counts_as_missing(project, capsys, damage):
 @pytest.mark.parametrize("table", ["filehash.json", "fingerprints.json", "runs"])
 def test_unreadable_engine_tables_are_rebuilt(project, tmp_path, table):
     args = ["run", str(project), "--workers", "0", "--summary-json", "s.json"]
-    assert cli(args, tmp_path).returncode == 0
+    assert cli_main(args, tmp_path).returncode == 0
     root = api.plan_pipeline(str(project), quiet=True).store.root
     paths = glob.glob(os.path.join(root, "runs", "*.json")) if table == "runs" else [os.path.join(root, table)]
     assert paths
     for p in paths:
         with open(p, "wb") as fh:
             fh.write(b"\xff\xfe{truncated")
-    r = cli(args, tmp_path)
+    r = cli_main(args, tmp_path)
     assert r.returncode == 0 and "warning:" in r.stderr and "Traceback" not in r.stderr, r.stderr
     assert sum(executed(json.load(open(tmp_path / "s.json"))).values()) == 0  # the tables are only bookkeeping
-    r = cli(["status", str(project)], tmp_path)     # rewritten: no warning the second time
+    r = cli_main(["status", str(project)], tmp_path)     # rewritten: no warning the second time
     assert r.returncode == 0 and "warning:" not in r.stderr, r.stderr
 
 
@@ -103,7 +103,7 @@ def test_deeply_nested_json_in_an_engine_table_is_damage_not_a_traceback(project
     """'[' * 200000 (or JSON nested deep enough that hashing it recurses too far) is read as a damaged file: one
     warning naming it, then rebuilt; never a RecursionError that blocks every command."""
     args = ["run", str(project), "--workers", "0", "--summary-json", "s.json"]
-    assert cli(args, tmp_path).returncode == 0
+    assert cli_main(args, tmp_path).returncode == 0
     root = api.plan_pipeline(str(project), quiet=True).store.root
     path = (os.path.join(tmp_path, "results", "syn", ".stages-published.json") if table == "published"
             else os.path.join(root, table))
@@ -111,12 +111,12 @@ def test_deeply_nested_json_in_an_engine_table_is_damage_not_a_traceback(project
     for damage in (b"[" * 200000, b'{"checksum": "x", "data": ' + b"[" * 5000 + b"]" * 5000 + b"}"):
         with open(path, "wb") as fh:
             fh.write(damage)
-        r = cli(args, tmp_path)
+        r = cli_main(args, tmp_path)
         assert r.returncode == 0 and "Traceback" not in r.stderr and "RecursionError" not in r.stderr, r.stderr
         assert f"warning: {path}" in r.stderr, r.stderr
         assert sum(executed(json.load(open(tmp_path / "s.json"))).values()) == 0
         for cmd in (["status", str(project)], ["results", str(project)]):
-            r = cli(cmd, tmp_path)
+            r = cli_main(cmd, tmp_path)
             assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
 
 
@@ -124,7 +124,7 @@ def test_a_damaged_array_is_reported_once(project, tmp_path):
     """A changed array chunk: one ``warning:`` line naming the entry, through the engine's reporter (it was also
     printed a second time as a raw UserWarning), and the entry is recomputed."""
     args = ["run", str(project), "--workers", "0", "--summary-json", "s.json"]
-    assert cli(args, tmp_path).returncode == 0
+    assert cli_main(args, tmp_path).returncode == 0
     plan = api.plan_pipeline(str(project), quiet=True)
     key = plan.stages["dist"].tasks[0].key
     chunks = [p for p in glob.glob(os.path.join(plan.store.object_path(key), "**", "*"), recursive=True)
@@ -133,7 +133,7 @@ def test_a_damaged_array_is_reported_once(project, tmp_path):
     data = bytearray(open(chunk, "rb").read())
     data[-1] ^= 0xFF                                                   # same size, other content
     open(chunk, "wb").write(bytes(data))
-    r = cli(args + ["--set", "sigma=2.0"], tmp_path)                  # summary reads the damaged tile
+    r = cli_main(args + ["--set", "sigma=2.0"], tmp_path)                  # summary reads the damaged tile
     assert r.returncode == 0, r.stderr
     assert r.stderr.count(f"cache entry {key[:12]} is corrupt") == 1, r.stderr
     assert "UserWarning" not in r.stderr and "warnings.warn" not in r.stderr, r.stderr

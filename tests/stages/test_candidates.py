@@ -22,7 +22,7 @@ from stages.errors import PipelineError, UserError
 from stages.execute import execute
 from stages.plan import build_plan, plan_pipeline
 
-from tests.helpers import cli, executed, loaded_plugin, make_project
+from tests.helpers import cli, cli_main, executed, loaded_plugin, make_project
 from tests.stages import synthetic_plugin as synthetic
 from tests.stages.test_pure_planning import listing
 
@@ -109,19 +109,19 @@ def test_each_task_loads_only_its_own_items(project):
 
 def test_dry_run_waits_for_the_candidates_then_lists_the_tasks(project, tmp_path):
     before = listing(tmp_path)
-    dry = cli(["run", "p.yaml", "--dry-run"], cwd=tmp_path)
+    dry = cli_main(["run", "p.yaml", "--dry-run"], cwd=tmp_path)
     assert dry.returncode == 0, dry.stderr
     assert "dist: would run once stage 'cand' has run (its tasks are the candidate pairs" in dry.stdout
     assert "out: would run once stage 'cand' has run" in dry.stdout
     assert "2 stage(s) planned once cand has run" in dry.stdout
-    status = json.loads(cli(["status", "p.yaml", "--json"], cwd=tmp_path).stdout)
+    status = json.loads(cli_main(["status", "p.yaml", "--json"], cwd=tmp_path).stdout)
     rows = {r["stage"]: r for r in status}
     assert rows["dist"]["to_run"] is None and rows["dist"]["waiting_for"] == "cand" and rows["dist"]["tasks"] == 0
     assert rows["cand"]["to_run"] == 1 and "waiting_for" not in rows["cand"]
     assert listing(tmp_path) == before                                        # planning wrote nothing
     plan = plan_pipeline(str(project))
     execute(plan.missing(), plan.store)                                       # round 1 only: feat and cand
-    after = cli(["run", "p.yaml", "--dry-run"], cwd=tmp_path)
+    after = cli_main(["run", "p.yaml", "--dry-run"], cwd=tmp_path)
     n_tasks = len(plan_pipeline(str(project)).stages["dist"].tasks)
     assert n_tasks > 1 and f"dist: {n_tasks} of {n_tasks} task(s) would run" in after.stdout, after.stdout
     assert "out: 1 of 1 task(s) would run" in after.stdout and "planned once" not in after.stdout

@@ -14,7 +14,7 @@ import pytest
 
 from stages import api
 
-from tests.helpers import ROOT, SYNTHETIC_YAML, ExternalCluster, cli, make_project, plugins_env
+from tests.helpers import ROOT, SYNTHETIC_YAML, ExternalCluster, cli, cli_main, make_project, plugins_env
 
 
 def _summary(path: Path) -> dict:
@@ -41,15 +41,16 @@ def test_run_dry_run_and_summary_json(tmp_path):
     assert res.returncode == 0, res.stderr
     assert _executed(_summary(tmp_path / "s.json"))["feat"] == 12
     assert "done in" in res.stdout
-    res = cli(["run", "p.yaml", "--set", "sigma=3", "--dry-run"], cwd=tmp_path)
+    # the read-only commands in this process (the same output as a process: test_cli_in_process.py)
+    res = cli_main(["run", "p.yaml", "--set", "sigma=3", "--dry-run"], cwd=tmp_path)
     assert res.returncode == 0
     assert "summary: 1 of 1 task(s) would run" in res.stdout and "param sigma: 1.0 -> 3.0" in res.stdout
     assert "feat: 0 of 12 task(s) would run (all cached)" in res.stdout
-    res = cli(["status", "p.yaml", "--set", "sigma=3"], cwd=tmp_path)
+    res = cli_main(["status", "p.yaml", "--set", "sigma=3"], cwd=tmp_path)
     assert "param sigma: 1.0 -> 3.0" in res.stdout
-    res = cli(["results", "p.yaml", "--json"], cwd=tmp_path)
+    res = cli_main(["results", "p.yaml", "--json"], cwd=tmp_path)
     assert json.loads(res.stdout)["n_items"] == 12
-    res = cli(["results", "p.yaml", "--set", "sigma=7"], cwd=tmp_path)
+    res = cli_main(["results", "p.yaml", "--set", "sigma=7"], cwd=tmp_path)
     assert res.returncode == 3 and "not computed yet" in res.stdout
 
 
@@ -97,7 +98,7 @@ def test_kill_9_then_resume_equals_uninterrupted_run(tmp_path):
     clean = tmp_path / "clean"
     clean.mkdir()
     make_project(clean, n=40)
-    assert cli(["run", "p.yaml", "--set", f"work={work}", "--quiet"], cwd=clean).returncode == 0
+    assert cli_main(["run", "p.yaml", "--set", f"work={work}", "--workers", "0", "--quiet"], cwd=clean).returncode == 0
     _assert_same_final_values(project, slow, clean, work)
 
 
@@ -140,7 +141,7 @@ def test_a_worker_killed_mid_run_then_resume_equals_uninterrupted_run(tmp_path):
     clean = tmp_path / "clean"
     clean.mkdir()
     make_project(clean, n=24)
-    assert cli(["run", "p.yaml", "--set", f"work={work}", "--workers", "0", "--quiet"], cwd=clean).returncode == 0
+    assert cli_main(["run", "p.yaml", "--set", f"work={work}", "--workers", "0", "--quiet"], cwd=clean).returncode == 0
     _assert_same_final_values(project, slow, clean, work)
     assert (slow / "results" / "syn" / "rep" / "summary.txt").read_bytes() == \
         (clean / "results" / "syn" / "rep" / "summary.txt").read_bytes()
@@ -154,9 +155,10 @@ def test_two_runs_at_once_on_one_cache(tmp_path):
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in range(2)]
     outs = [p.communicate(timeout=300) for p in procs]
     assert [p.returncode for p in procs] == [0, 0], outs
-    res = cli(["run", "p.yaml", "--set", "work=30", "--summary-json", "s2.json"], cwd=tmp_path)
+    res = cli_main(["run", "p.yaml", "--set", "work=30", "--summary-json", "s2.json"], cwd=tmp_path)
     assert sum(_executed(_summary(tmp_path / "s2.json")).values()) == 0
-    assert json.loads(cli(["results", "p.yaml", "--set", "work=30", "--json"], cwd=tmp_path).stdout)["n_items"] == 30
+    res = cli_main(["results", "p.yaml", "--set", "work=30", "--json"], cwd=tmp_path)
+    assert json.loads(res.stdout)["n_items"] == 30
 
 
 PLUGIN = '''
@@ -248,7 +250,7 @@ def test_functions_fits_the_terminal_with_whole_first_sentences(tmp_path, column
 
     assert first_sentence("Per method: the template\n    and 4 poses (e.g. the best). More.\n\nArgs: x") == \
         "Per method: the template and 4 poses (e.g. the best)."
-    res = cli(["functions"], cwd=tmp_path, env={"COLUMNS": str(columns)})
+    res = cli_main(["functions"], cwd=tmp_path, env={"COLUMNS": str(columns)})
     assert res.returncode == 0, res.stderr
     lines = res.stdout.splitlines()
     assert lines and max(len(x) for x in lines) <= columns

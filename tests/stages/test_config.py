@@ -7,7 +7,7 @@ from stages.config import load_pipeline
 from stages.errors import PipelineError
 from stages.plan import build_plan
 
-from tests.helpers import SYNTHETIC_YAML, cli, make_project
+from tests.helpers import SYNTHETIC_YAML, cli_main, make_project
 
 CASES = {
     "unknown_function": (SYNTHETIC_YAML.replace("synthetic.summarize", "synthetic.summarise"),
@@ -93,12 +93,12 @@ def test_bad_overrides(tmp_path, monkeypatch, override, needle):
 
 
 def test_missing_pipeline_file_via_cli_exits_2(tmp_path):
-    res = cli(["run", "nope.yaml"], cwd=tmp_path)
+    res = cli_main(["run", "nope.yaml"], cwd=tmp_path)
     assert res.returncode == 2 and "nope.yaml" in res.stderr and "not found" in res.stderr
     assert "Traceback" not in res.stderr
 
 
 def test_every_command_has_help(tmp_path):
     for cmd in ([], ["run"], ["status"], ["sweep"], ["results"], ["gc"], ["report"], ["functions"]):
-        res = cli([*cmd, "--help"], cwd=tmp_path)
+        res = cli_main([*cmd, "--help"], cwd=tmp_path)
         assert res.returncode == 0 and "usage:" in res.stdout, cmd

@@ -162,6 +162,7 @@ def test_files_datasets_accept_upper_case_extensions(tmp_path, monkeypatch):
 
 
 @pytest.mark.course
+@pytest.mark.e2e
 def test_chairs_on_own_views_with_a_missing_view_and_no_compare_folder(tmp_path):
     """27 course chairs (pre-rendered views) in a folder of one's own, one view of one chair deleted, no
     compare folder: views of that chair fails, everything else (pairs, solve, evaluate, labels) completes."""

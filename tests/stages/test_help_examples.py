@@ -18,7 +18,7 @@ import pytest
 
 from stages.cli import build_parser
 
-from tests.helpers import COURSE_DATA, ROOT, cli, free_port
+from tests.helpers import COURSE_DATA, ROOT, cli, cli_main, free_port
 
 PREFIX = "python -m stages"
 
@@ -117,7 +117,7 @@ def _needs_course_data(command: str) -> bool:
 
 def _check(command: str, tmp: Path) -> None:
     args = runnable(command, tmp)
-    r = cli(args, ROOT, timeout=600)
+    r = cli_main(args, ROOT)   # in this process: the same output as python -m stages (test_cli_in_process.py)
     ok = (0, 3) if args[0] == "results" else (0,)  # results of a configuration not computed yet: 3
     assert r.returncode in ok, f"{command}\n-> {args}\nrc={r.returncode}\n{r.stderr[-3000:]}"
     assert "Traceback" not in r.stderr, r.stderr
@@ -144,5 +144,5 @@ def test_readme_command_runs(command, tmp_path):
 
 def test_a_grid_on_a_stage_that_does_not_exist_fails(tmp_path):
     """The check above can fail: the old help example named a stage no pipeline has."""
-    r = cli(runnable("python -m stages sweep pipeline.yaml --grid align_mrf.sigma_scale=0.5,1,2", tmp_path), ROOT)
+    r = cli_main(runnable("python -m stages sweep pipeline.yaml --grid align_mrf.sigma_scale=0.5,1,2", tmp_path), ROOT)
     assert r.returncode == 2 and "align_mrf" in r.stderr, r.stderr

@@ -14,7 +14,7 @@ from stages.errors import UserError
 from stages.publish import PUBLISHED_NAME
 from stages.cache_root import CACHE_MARKER
 
-from tests.helpers import SYNTHETIC_YAML, cli, make_project, run_quiet
+from tests.helpers import SYNTHETIC_YAML, cli_main, make_project, run_quiet
 
 
 @pytest.fixture()
@@ -222,7 +222,7 @@ def test_an_output_folder_where_publishing_could_do_harm_is_refused(project, tmp
 def test_out_at_the_home_folder_is_an_error_line(project, tmp_path):
     home = tmp_path / "home"
     home.mkdir()
-    r = cli(["run", str(project), "--workers", "0", "--out", str(home)], tmp_path, env={"HOME": str(home)})
+    r = cli_main(["run", str(project), "--workers", "0", "--out", str(home)], tmp_path, env={"HOME": str(home)})
     assert r.returncode == 1 and "Traceback" not in r.stderr
     assert f"error: the output folder {home} is your home folder" in r.stderr, r.stderr
     assert os.listdir(home) == []

@@ -14,7 +14,7 @@ from html.parser import HTMLParser
 import numpy as np
 import pytest
 
-from tests.helpers import SYNTHETIC_YAML, cli, loaded_plugin, make_project, plugins_env
+from tests.helpers import SYNTHETIC_YAML, cli, cli_main, loaded_plugin, make_project, plugins_env
 from stages import api
 from stages.report import render_value, write_report
 from stages.report.context import stage_seconds
@@ -303,7 +303,7 @@ def test_report_before_any_run_and_cli(project, tmp_path):
     api.run(path, workers=0, quiet=True)
     env = plugins_env(PLUGIN)
     env["PYTHONPATH"] += os.pathsep + str(tmp_path)
-    res = cli(["report", "p.yaml", "--out", "r.html"], cwd=tmp_path, env=env, timeout=120)
+    res = cli_main(["report", "p.yaml", "--out", "r.html"], cwd=tmp_path, env=env, timeout=120)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == str(tmp_path / "r.html")
     doc = parse(str(tmp_path / "r.html"))
@@ -375,10 +375,10 @@ def test_report_results_folder_option(project, tmp_path):
     shutil.move(str(tmp_path / "results" / "syn"), str(tmp_path / "elsewhere"))
     env = plugins_env(PLUGIN)
     env["PYTHONPATH"] += os.pathsep + str(tmp_path)
-    res = cli(["report", "p.yaml", "--out", "r.html"], cwd=tmp_path, env=env, timeout=120)
+    res = cli_main(["report", "p.yaml", "--out", "r.html"], cwd=tmp_path, env=env, timeout=120)
     assert res.returncode == 0, res.stderr
     assert parse(str(tmp_path / "r.html")).images == []            # the pipeline's own output folder is empty
-    res = cli(["report", "p.yaml", "--results", "elsewhere"], cwd=tmp_path, env=env, timeout=120)
+    res = cli_main(["report", "p.yaml", "--results", "elsewhere"], cwd=tmp_path, env=env, timeout=120)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == str(tmp_path / "elsewhere" / "report.html")
     assert len(parse(res.stdout.strip()).images) == 2 + 2 * 6

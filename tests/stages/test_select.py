@@ -12,7 +12,7 @@ from stages.cli import parse
 from stages.errors import PipelineError
 from stages.store import Store
 
-from tests.helpers import cli, executed, make_project, run_quiet
+from tests.helpers import cli_main, executed, make_project, run_quiet
 
 
 @pytest.fixture()
@@ -75,7 +75,7 @@ def test_force_and_targets_name_stages_of_the_pipeline(project):
         api.plan_pipeline(str(project), targets=["sumary"])
     with pytest.raises(PipelineError, match="--force rep: the targets of this run"):
         api.plan_pipeline(str(project), targets=["summary"], force=["rep"])
-    res = cli(["run", "p.yaml", "--force", "nope", "--dry-run"], cwd=project.parent)
+    res = cli_main(["run", "p.yaml", "--force", "nope", "--dry-run"], cwd=project.parent)
     assert res.returncode == 2 and "no stage 'nope'" in res.stderr and "Traceback" not in res.stderr
 
 

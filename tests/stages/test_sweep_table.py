@@ -13,7 +13,7 @@ import pytest
 from stages.errors import PipelineError
 from stages.execute import Progress
 from stages.sweep import MAX_WIDTH, figure_name, format_table, headline_columns, plot_sweep, write_table
-from tests.helpers import SYNTHETIC_YAML, cli, loaded_plugin, make_project, plugins_env
+from tests.helpers import SYNTHETIC_YAML, cli_main, loaded_plugin, make_project, plugins_env
 
 PLUGIN = "sweep_table_plugin"
 PLUGIN_SOURCE = '''
@@ -137,7 +137,7 @@ def test_sweep_cli_prints_headline_table_and_writes_csv(project, tmp_path):
     env = plugins_env(PLUGIN)
     env["PYTHONPATH"] += ":" + str(tmp_path)
     env["COLUMNS"] = "0"     # unset: the output is a pipe, so the default width
-    res = cli(["sweep", "p.yaml", "--grid", "sigma=0.5,1,2", "--workers", "0", "--quiet", "--csv", "full.csv"],
+    res = cli_main(["sweep", "p.yaml", "--grid", "sigma=0.5,1,2", "--workers", "0", "--quiet", "--csv", "full.csv"],
               cwd=tmp_path, env=env, timeout=300)
     assert res.returncode == 0, res.stderr
     lines = res.stdout.splitlines()
@@ -150,11 +150,11 @@ def test_sweep_cli_prints_headline_table_and_writes_csv(project, tmp_path):
     with open(tmp_path / "full.csv", newline="") as fh:
         full = list(csv.reader(fh))
     assert len(full) == 4 and "count_149" in full[0] and "per_item.item000.value" not in full[0]  # >12: not flat
-    res = cli(["sweep", "p.yaml", "--grid", "sigma=0.5,1,2", "--workers", "0", "--quiet", "--metrics",
+    res = cli_main(["sweep", "p.yaml", "--grid", "sigma=0.5,1,2", "--workers", "0", "--quiet", "--metrics",
                "count_00*"], cwd=tmp_path, env=env, timeout=300)
     assert res.returncode == 0, res.stderr
     assert res.stdout.splitlines()[0].split()[:4] == ["sigma", "count_000", "count_001", "count_002"]
-    res = cli(["sweep", "p.yaml", "--grid", "sigma=0.5,1,2", "--workers", "0", "--quiet"], cwd=tmp_path,
+    res = cli_main(["sweep", "p.yaml", "--grid", "sigma=0.5,1,2", "--workers", "0", "--quiet"], cwd=tmp_path,
               env={**env, "COLUMNS": "80"}, timeout=300)
     table = [x for x in res.stdout.splitlines() if not x.startswith("figure: ")]   # (a path: not wrapped)
     assert table and max(len(x) for x in table) <= 80

@@ -18,7 +18,7 @@ from stages.config import load_pipeline
 from stages.errors import PipelineError, UserError
 from stages.store import Store
 
-from tests.helpers import ROOT, SYNTHETIC_YAML, cli, free_port, make_project
+from tests.helpers import ROOT, SYNTHETIC_YAML, cli, cli_main, free_port, make_project
 
 BILLION_LAUGHS = "\n".join(
     ['a0: &a0 ["lol","lol","lol","lol","lol","lol","lol","lol","lol"]']
@@ -43,11 +43,12 @@ def _fails(r: subprocess.CompletedProcess, code: int, *words: str) -> str:
 
 
 # ---- YAML -------------------------------------------------------------------------------------------
+@pytest.mark.timeout(60)   # fails fast: within a minute, as the subprocess it was run in before
 def test_a_billion_laughs_file_fails_fast(tmp_path):
     p = tmp_path / "laughs.yaml"
     p.write_text(BILLION_LAUGHS)
     assert p.stat().st_size < 1024
-    _fails(cli(["status", str(p)], tmp_path, timeout=60), 2, "aliases expand to more than")
+    _fails(cli_main(["status", str(p)], tmp_path), 2, "aliases expand to more than")
 
 
 def _reference_bomb(levels: int, as_list: bool) -> str:
@@ -62,13 +63,14 @@ def _reference_bomb(levels: int, as_list: bool) -> str:
         "datasets: {items: {files: 'data/*.txt', optional: true}}", ""])
 
 
+@pytest.mark.timeout(60)
 @pytest.mark.parametrize("as_list", [False, True], ids=["string", "list"])
 def test_a_reference_bomb_fails_fast_naming_the_key(tmp_path, as_list):
     """11 levels of ten ${...} references each (10**11 copies): an error naming the parameter that grows too
     large, within seconds (it used to hang), like the alias bomb."""
     p = tmp_path / "bomb.yaml"
     p.write_text(_reference_bomb(11, as_list))
-    _fails(cli(["status", str(p)], tmp_path, timeout=60), 2, "expands to more than", "bomb.yaml:")  # first: a hang
+    _fails(cli_main(["status", str(p)], tmp_path), 2, "expands to more than", "bomb.yaml:")  # first: a hang
     with pytest.raises(PipelineError, match="expands to more than") as err:                      # times out
         load_pipeline(str(p))
     assert err.value.key.startswith("params.l") and err.value.line
@@ -105,7 +107,7 @@ def test_duplicate_keys_are_an_error_naming_both_lines(tmp_path):
 
 
 def test_a_binary_file_as_pipeline_is_a_clear_error(tmp_path):
-    _fails(cli(["run", "/bin/ls", "--workers", "0"], tmp_path), 2, "not a text file")
+    _fails(cli_main(["run", "/bin/ls", "--workers", "0"], tmp_path), 2, "not a text file")
 
 
 # ---- names ------------------------------------------------------------------------------------------
@@ -125,7 +127,7 @@ def test_names_must_be_plain_identifiers(tmp_path, text, what):
 # ---- options ----------------------------------------------------------------------------------------
 @pytest.mark.parametrize("workers", ["-1", "1000", "two"])
 def test_workers_out_of_range_is_a_usage_error(project, tmp_path, workers):
-    r = cli(["run", str(project), "--workers", workers], tmp_path, timeout=60)
+    r = cli_main(["run", str(project), "--workers", workers], tmp_path)
     assert r.returncode == 2 and "--workers" in r.stderr and "Traceback" not in r.stderr, r.stderr
 
 
@@ -135,7 +137,7 @@ def test_a_folder_given_for_an_output_file_is_a_usage_error(project, tmp_path, c
     folder = tmp_path / "somewhere"
     folder.mkdir()
     args = [a.format(p=project, d=folder) for a in command]
-    r = cli(args, tmp_path, timeout=60)
+    r = cli_main(args, tmp_path)
     assert r.returncode == 2 and "is a folder" in r.stderr and "Traceback" not in r.stderr, r.stderr
     assert list(folder.iterdir()) == []  # no .tmp left behind
 
@@ -150,7 +152,7 @@ def test_atomic_write_to_a_folder_leaves_no_tmp(tmp_path):
 
 @pytest.mark.parametrize("grid", ["sigma", "sigma=", "=1,2", "sigma=,"])
 def test_bad_grid_syntax_is_a_usage_error(project, tmp_path, grid):
-    _fails(cli(["sweep", str(project), "--grid", grid, "--workers", "0"], tmp_path, timeout=60), 2, "--grid")
+    _fails(cli_main(["sweep", str(project), "--grid", grid, "--workers", "0"], tmp_path), 2, "--grid")
 
 
 def test_a_closed_scheduler_is_a_clear_error(project, tmp_path):
@@ -161,7 +163,7 @@ def test_a_closed_scheduler_is_a_clear_error(project, tmp_path):
 
 
 def test_a_malformed_scheduler_address_is_a_clear_error(project, tmp_path):
-    _fails(cli(["run", str(project), "--scheduler", "not-an-address"], tmp_path, timeout=60), 1, "not-an-address")
+    _fails(cli_main(["run", str(project), "--scheduler", "not-an-address"], tmp_path), 1, "not-an-address")
 
 
 # ---- parameter values the functions cannot use -------------------------------------------------------
@@ -196,13 +198,13 @@ def _snapshot(folder: Path) -> dict:
 
 def test_status_results_report_and_dry_run_write_nothing_to_the_cache(project, tmp_path):
     """What "works on a read-only cache" means: these commands never write there."""
-    assert cli(["run", str(project), "--workers", "0"], tmp_path).returncode == 0
+    assert cli_main(["run", str(project), "--workers", "0"], tmp_path).returncode == 0
     (tmp_path / "data" / "s001.txt").write_text("changed\n")  # so the planner has something new to hash
     cache = tmp_path / "cache"
     before = _snapshot(cache)
     for command in (["status", str(project)], ["results", str(project)], ["run", str(project), "--dry-run"],
                     ["report", str(project), "--out", str(tmp_path / "r.html")]):
-        r = cli(command, tmp_path)
+        r = cli_main(command, tmp_path)
         assert r.returncode in (0, 3) and "Traceback" not in r.stderr, r.stderr
     assert _snapshot(cache) == before
 
@@ -215,10 +217,10 @@ def test_run_on_an_unwritable_cache_is_a_clear_error(project, monkeypatch):
 
 def test_an_unwritable_output_folder_is_a_clear_error(project, tmp_path):
     (tmp_path / "blocker").write_text("a file where the output folder's parent should be\n")
-    err = _fails(cli(["run", str(project), "--workers", "0", "--out", str(tmp_path / "blocker" / "out")],
+    err = _fails(cli_main(["run", str(project), "--workers", "0", "--out", str(tmp_path / "blocker" / "out")],
                      tmp_path), 1, "output folder")
     assert "--out" in err
-    r = cli(["run", str(project), "--workers", "0", "--summary-json", "s.json"], tmp_path)
+    r = cli_main(["run", str(project), "--workers", "0", "--summary-json", "s.json"], tmp_path)
     assert r.returncode == 0, r.stderr
     summary = json.loads((tmp_path / "s.json").read_text())
     assert sum(s["executed"] for s in summary["stages"].values()) == 0  # everything was stored the first time
@@ -226,7 +228,7 @@ def test_an_unwritable_output_folder_is_a_clear_error(project, tmp_path):
 
 # ---- failures and interruptions ---------------------------------------------------------------------
 def test_quiet_still_prints_each_failure(project, tmp_path):
-    r = cli(["run", str(project), "--workers", "0", "--quiet", "--set", "feat.fail_on=item 3 "], tmp_path)
+    r = cli_main(["run", str(project), "--workers", "0", "--quiet", "--set", "feat.fail_on=item 3 "], tmp_path)
     assert r.returncode == 1
     assert "FAILED feat[s003]" in r.stderr and "marker" in r.stderr, r.stderr
 
@@ -278,13 +280,13 @@ def test_tilde_and_variables_in_path_options_are_expanded(project, tmp_path):
     home = tmp_path / "home"
     home.mkdir()
     env = {"HOME": str(home), "OUT_BASE": str(tmp_path / "base")}
-    r = cli(["run", str(project), "--workers", "0", "--cache", "~/c", "--out", "$OUT_BASE/o",
+    r = cli_main(["run", str(project), "--workers", "0", "--cache", "~/c", "--out", "$OUT_BASE/o",
              "--summary-json", "~/s.json"], tmp_path, env=env)
     assert r.returncode == 0, r.stderr
     assert (home / "c" / ".stages-cache").is_file() and (home / "s.json").is_file()
     assert (tmp_path / "base" / "o" / "metrics.json").is_file()
-    r = cli(["report", str(project), "--cache", "~/c", "--results", "${OUT_BASE}/o", "--out", "${OUT_BASE}/r.html"],
-            tmp_path, env=env)
+    r = cli_main(["report", str(project), "--cache", "~/c", "--results", "${OUT_BASE}/o",
+                  "--out", "${OUT_BASE}/r.html"], tmp_path, env=env)
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "base" / "r.html").is_file()
     assert not [n for n in os.listdir(tmp_path) if n.startswith(("~", "$"))]
@@ -300,7 +302,7 @@ def test_tilde_in_the_pipelines_cache_and_output_is_expanded(tmp_path, monkeypat
 
 @pytest.mark.parametrize("option", ["--cache", "--out", "--summary-json"])
 def test_an_undefined_variable_in_a_path_option_is_refused(project, tmp_path, option):
-    r = cli(["run", str(project), "--workers", "0", option, "$NO_SUCH_VARIABLE_XYZ/x"], tmp_path)
+    r = cli_main(["run", str(project), "--workers", "0", option, "$NO_SUCH_VARIABLE_XYZ/x"], tmp_path)
     assert r.returncode in (1, 2) and "Traceback" not in r.stderr, r.stderr
     assert "$NO_SUCH_VARIABLE_XYZ" in r.stderr and "not set" in r.stderr, r.stderr
     assert not [n for n in os.listdir(tmp_path) if n.startswith("$")]
