@@ -70,14 +70,14 @@ def _fresh_process_state() -> None:
     """Forget what the engine keeps per process, as a new ``python -m stages`` process starts without it: the
     warnings said once, the code digests and the table of them read from a cache, validated manifests, decoded
     entries. (The parsed source files stay: they are keyed by file, size and mtime.)"""
-    from stages import errors, fingerprint, store
+    from stages import errors, fingerprint, read_cache, store
 
     errors._WARNED.clear()
     fingerprint._MEMO.clear()
     fingerprint._DISK.update(path=None, table={}, dirty=False)
     store._MANIFESTS.clear()
-    store._READ_CACHE.items.clear()
-    store._READ_CACHE.bytes = 0
+    read_cache.READ_CACHE.items.clear()
+    read_cache.READ_CACHE.bytes = 0
 
 
 def cli_main(args: list[str], cwd: Path, env: dict | None = None, timeout: float | None = None,
