@@ -19,7 +19,14 @@ Landmarks: the original landmark vertex -> the nearest remeshed vertex of the sa
 point; their distances / sqrt(remeshed area), printed per mesh (mean and max), are the floor of any error
 measured on this set.
 
-Run:  python bench/remesh_scape.py [--data SCAPE] [--out /tmp/scape_remeshed] [--seed 0]
+With ``--floor``: also the error of the exact map, measured as ``bench/correspondence.py`` measures (geodesic
+on the pose / sqrt(area) at the same 2,000 farthest-point template vertices) against the written ground truth.
+The exact map sends a remeshed template vertex to the closest point of the original template's surface (any
+point of a triangle, not a vertex), that point of the original pose, and its nearest remeshed pose vertex: the
+best map a method can return on these meshes; its error is what the ground truth's snap to original vertices
+costs every method.
+
+Run:  python bench/remesh_scape.py [--data SCAPE] [--out /tmp/scape_remeshed] [--seed 0] [--poses N] [--floor]
 """
 from __future__ import annotations
 
@@ -87,6 +94,50 @@ def true_map(V_template_new: np.ndarray, V_template: np.ndarray, V_pose: np.ndar
     o, d_template = nearest(V_template_new, V_template)
     truth, d_pose = nearest(V_pose[o], V_pose_new)
     return truth, d_template, d_pose
+
+
+def exact_map(V_template_new: np.ndarray, V_template: np.ndarray, F_template: np.ndarray, V_pose: np.ndarray,
+              V_pose_new: np.ndarray) -> np.ndarray:
+    """Remeshed template vertices (n_s,3) -> closest points on the original template (V_template (n,3),
+    F_template (m,3)) -> the same barycentric points of the original pose (V_pose (n,3), same triangles) ->
+    nearest remeshed pose vertex of V_pose_new (n_t,3): (n_s,) int64 (Open3D's closest-point query)."""
+    from corr_core._open3d import load_open3d
+
+    o3d = load_open3d()
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(V_template, np.float32)),
+                        o3d.core.Tensor(np.asarray(F_template, np.uint32)))
+    hit = scene.compute_closest_points(o3d.core.Tensor(np.asarray(V_template_new, np.float32)))
+    tri = np.asarray(F_template)[hit["primitive_ids"].numpy().astype(np.int64)]          # (n_s, 3)
+    u, v = hit["primitive_uvs"].numpy().astype(np.float64).T
+    bary = np.stack([1 - u - v, u, v], axis=1)
+    points = np.einsum("pk,pkd->pd", bary, np.asarray(V_pose, np.float64)[tri])
+    return nearest(points, V_pose_new)[0]
+
+
+def floor_errors(out: str, data: str, names: list[str]) -> dict:
+    """{pose: mean error of ``exact_map`` against ground_truth/<pose>.txt} (geodesic on the remeshed pose /
+    sqrt(its area), at the 2,000 farthest-point template vertices bench/correspondence.py evaluates), printed."""
+    from corr_core.correspondence.dense import basis as dense_basis
+    from corr_core.correspondence.dense import measures
+    from corr_core.geometry.mesh_io import load_mesh
+
+    Vs, Fs = load_mesh(os.path.join(data, "meshes", "template", "mesh000.obj"))
+    Vs2, Fs2 = load_mesh(os.path.join(out, "meshes", "template", "mesh000.obj"))
+    S = dense_basis.mesh_basis(Vs2, Fs2, k=100)
+    vertices = S.vids[S.samples[:2000]]
+    floors = {}
+    for name in names:
+        Vt, _ = load_mesh(os.path.join(data, "meshes", "test", f"{name}.obj"))
+        Vt2, Ft2 = load_mesh(os.path.join(out, "meshes", "test", f"{name}.obj"))
+        truth = np.loadtxt(os.path.join(out, "ground_truth", f"{name}.txt"), dtype=np.int64)
+        exact = exact_map(Vs2, Vs, Fs, Vt, Vt2)
+        errs = measures.dense_errors(Vt2, Ft2, {"exact": exact}, truth, vertices=vertices)["exact"]
+        floors[name] = float(errs.mean())
+        print(f"{name:<8} exact map against the ground truth: mean {errs.mean():.5f}, within 0.05 "
+              f"{np.mean(errs <= 0.05):.3f}", flush=True)
+    print(f"{'poses':<8} exact map against the ground truth: mean {np.mean(list(floors.values())):.5f}")
+    return floors
 
 
 def snapped_landmarks(ids: np.ndarray, V: np.ndarray, V_new: np.ndarray, what: str) -> tuple[np.ndarray, np.ndarray]:
@@ -196,8 +247,11 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="/tmp/scape_remeshed", help="output folder (outside the repository)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--poses", type=int, default=None, help="only the first N test meshes")
+    ap.add_argument("--floor", action="store_true", help="also the error of the exact map (see above)")
     args = ap.parse_args(argv)
-    remesh_set(args.data, args.out, args.seed, args.poses)
+    info = remesh_set(args.data, args.out, args.seed, args.poses)
+    if args.floor:
+        floor_errors(args.out, args.data, [k for k in info if k != "mesh000"])
     return 0
 
 

@@ -142,3 +142,15 @@ def test_pyfm_gets_its_landmark_pairs_target_first(monkeypatch):
     np.testing.assert_array_equal(seen["landmarks"], [[1, 10], [2, 20]])
     run_pyfm("template", "t.obj")
     assert seen["landmarks"] is None
+
+
+@pytest.mark.course
+def test_the_exact_map_of_same_triangles_is_vertex_i_to_i():
+    """exact_map (the --floor reference) on the course meshes themselves: a vertex's closest surface point is
+    itself, carried to the same vertex of the pose."""
+    from bench.remesh_scape import exact_map
+
+    Vs, Fs = _mesh(SCAPE / "meshes/template/mesh000.obj")
+    Vt, _ = _mesh(SCAPE / "meshes/test/mesh002.obj")
+    some = np.arange(0, len(Vs), 7)
+    np.testing.assert_array_equal(exact_map(Vs[some], Vs, Fs, Vt, Vt), some)
