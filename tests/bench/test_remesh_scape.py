@@ -154,3 +154,19 @@ def test_the_exact_map_of_same_triangles_is_vertex_i_to_i():
     Vt, _ = _mesh(SCAPE / "meshes/test/mesh002.obj")
     some = np.arange(0, len(Vs), 7)
     np.testing.assert_array_equal(exact_map(Vs[some], Vs, Fs, Vt, Vt), some)
+
+
+def test_runs_are_merged_on_their_common_pairs_and_flips_listed():
+    from bench.correspondence import flip_lines, merged_rows
+
+    def run(method, accs, seconds):
+        return {"pairs": [{"mesh": m, method: {"landmark_accuracy": a}} for m, a in accs.items()],
+                "template_seconds": seconds}
+
+    rows, template_seconds = merged_rows([run("dense_auto", {"mesh002": 1.0, "mesh004": 0.25}, {"dense": 2.0}),
+                                          run("pyfm_none", {"mesh004": 0.4, "mesh005": 1.0}, {"pyfm": 1.0})])
+    assert rows == [{"mesh": "mesh004", "dense_auto": {"landmark_accuracy": 0.25},
+                     "pyfm_none": {"landmark_accuracy": 0.4}}]
+    assert template_seconds == {"dense": 2.0, "pyfm": 1.0}
+    assert flip_lines(rows, ["dense_auto", "pyfm_none"])[1:] == ["  dense_auto: 1 (mesh004 0.25)",
+                                                                 "  pyfm_none: 1 (mesh004 0.40)"]
