@@ -30,9 +30,11 @@ The summary also lists the flipped targets (landmark accuracy < 0.5: a mirrored 
 
 Run:  python bench/correspondence.py [--data SCAPE] [--pairs N] [--json OUT]
                                      [--methods pyfm_none,pyfm_5pts,dense_sparse,dense_auto]
-      python bench/correspondence.py --summarize OUT.json [OUT2.json ...]   (the table of saved, possibly partial,
-          runs; several files: their methods side by side on the pairs they share, e.g. the project's methods and
-          pyFM run one after the other; the CPU-time ratios then compare two runs)
+      python bench/correspondence.py --summarize OUT.json [OUT2.json ...] [--relative-to BASE.json ...]
+          (the table of saved, possibly partial, runs; several files: their methods side by side on the pairs they
+          share, e.g. the project's methods and pyFM run one after the other, the CPU-time ratios then compare two
+          runs; --relative-to: each method's means against another set of runs, e.g. the remeshed set against
+          the course meshes)
 """
 from __future__ import annotations
 
@@ -203,13 +205,35 @@ def merged_rows(runs: list[dict]) -> tuple[list, dict]:
     return rows, template_seconds
 
 
-def summarize(paths: list[str]) -> int:
-    """Print the table of results files written with --json (also of interrupted runs: their finished pairs);
-    several files are merged on the pairs they all have (``merged_rows``)."""
+def relative_lines(summary: dict, base: dict, label: str) -> list[str]:
+    """Printable lines: each method of ``summary`` (and of ``base``, both {method: {measure: mean}}) against
+    ``base``: mean error and CPU seconds as ratios, landmark accuracy and the within-0.05 / 0.25 fractions as
+    differences."""
+    lines = [f"relative to {label} (ratio of mean error, of s/pair; difference of lm acc, <=0.05, <=0.25):"]
+    for m in (m for m in summary if m in base):
+        s, b = summary[m], base[m]
+        diff = {k: s[k] - b[k] for k in ("landmark_accuracy", "within_0.05", "within_0.25")}
+        lines.append(f"  {m:<13} mean err x{s['mean_error'] / b['mean_error']:.3f}  s/pair "
+                     f"x{s['seconds'] / b['seconds']:.3f}  lm acc {diff['landmark_accuracy']:+.4f}  <=0.05 "
+                     f"{diff['within_0.05']:+.3f}  <=0.25 {diff['within_0.25']:+.3f}")
+    return lines
+
+
+def load_runs(paths: list[str]) -> list[dict]:
+    """The --json results files ``paths``, read."""
     runs = []
     for path in paths:
         with open(path) as fh:
             runs.append(json.load(fh))
+    return runs
+
+
+def summarize(paths: list[str], relative_to: list[str] | None = None) -> int:
+    """Print the table of results files written with --json (also of interrupted runs: their finished pairs);
+    several files are merged on the pairs they all have (``merged_rows``). ``relative_to``: results files of
+    a baseline (e.g. the same methods on the same-triangulation data), compared method by method on the
+    pairs' means (``relative_lines``)."""
+    runs = load_runs(paths)
     rows, template_seconds = merged_rows(runs)
     if not rows:
         print(f"{', '.join(paths)}: no finished pair (in common)", file=sys.stderr)
@@ -218,7 +242,14 @@ def summarize(paths: list[str]) -> int:
     print("pairs: " + " ".join(r["mesh"] for r in rows))
     for path, run in zip(paths, runs):
         print(f"{path}: data {run.get('data', '?')}, ground truth {run.get('truth', '?')}")
-    print_summary(rows, methods, template_seconds, runs[0].get("eval_vertices", 2000), "meshes/template/mesh000.obj")
+    summary = print_summary(rows, methods, template_seconds, runs[0].get("eval_vertices", 2000),
+                            "meshes/template/mesh000.obj")
+    if relative_to:
+        base_rows, _ = merged_rows(load_runs(relative_to))
+        base = {m: {k: float(np.mean([r[m][k] for r in base_rows])) for k in SUMMARY_KEYS}
+                for m in base_rows[0] if m != "mesh"}
+        for line in relative_lines(summary, base, ", ".join(relative_to)):
+            print(line)
     return 0
 
 
@@ -241,9 +272,11 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None, help="write per-pair and summary results here")
     ap.add_argument("--summarize", default=None, nargs="+", metavar="JSON",
                     help="only print the table of --json files (several: merged on their common pairs)")
+    ap.add_argument("--relative-to", default=None, nargs="+", metavar="JSON",
+                    help="with --summarize: compare each method with these --json results (e.g. same-triangulation)")
     args = ap.parse_args(argv)
     if args.summarize:
-        return summarize(args.summarize)
+        return summarize(args.summarize, args.relative_to)
     _limit_threads()
 
     from corr_core.correspondence.dense import basis as dense_basis

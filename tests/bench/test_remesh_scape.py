@@ -170,3 +170,16 @@ def test_runs_are_merged_on_their_common_pairs_and_flips_listed():
     assert template_seconds == {"dense": 2.0, "pyfm": 1.0}
     assert flip_lines(rows, ["dense_auto", "pyfm_none"])[1:] == ["  dense_auto: 1 (mesh004 0.25)",
                                                                  "  pyfm_none: 1 (mesh004 0.40)"]
+
+
+def test_relative_lines_give_ratios_and_differences():
+    from bench.correspondence import relative_lines
+
+    def means(err, acc, w05, w25, sec):
+        return {"mean_error": err, "landmark_accuracy": acc, "within_0.05": w05, "within_0.25": w25, "seconds": sec}
+
+    lines = relative_lines({"dense_auto": means(0.011, 0.95, 0.98, 1.0, 5.0), "pyfm_none": means(1, 1, 1, 1, 1)},
+                           {"dense_auto": means(0.010, 1.0, 0.99, 1.0, 10.0)}, "base.json")
+    assert lines[0].startswith("relative to base.json")
+    assert lines[1:] == ["  dense_auto    mean err x1.100  s/pair x0.500  lm acc -0.0500  <=0.05 -0.010  "
+                         "<=0.25 +0.000"]
