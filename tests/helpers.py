@@ -99,7 +99,7 @@ def cli_main(args: list[str], cwd: Path, env: dict | None = None, timeout: float
     import warnings
 
     from stages import cli as stages_cli
-    from stages import errors
+    from stages import logs
 
     env = {k: v for k, v in (env or {}).items() if k != "PYTHONPATH"}   # the modules are imported already
     if "STAGES_PLUGINS" in env:
@@ -120,7 +120,7 @@ def cli_main(args: list[str], cwd: Path, env: dict | None = None, timeout: float
         os.environ.update(env)
         os.chdir(cwd)
         # the engine's reporter is installed anew, writing to this call's stderr
-        root.handlers = [h for h in root.handlers if not isinstance(h.formatter, errors._OneLine)]
+        root.handlers = [h for h in root.handlers if not isinstance(h.formatter, logs._OneLine)]
         logging._warnings_showwarning = None
         with warnings.catch_warnings(), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
             warnings.resetwarnings()            # the filters of a new interpreter (pytest records warnings)
