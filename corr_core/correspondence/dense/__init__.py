@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from corr_core.correspondence.dense.basis import MeshBasis, map_to_original, mesh_basis
+from corr_core.correspondence.dense.basis import MeshBasis, map_to_local, map_to_original, mesh_basis
 from corr_core.correspondence.dense.deform import refine_deform
 from corr_core.correspondence.dense.init import automatic_hypotheses, map_automatic, map_from_points
 from corr_core.correspondence.dense.refine import (DEFAULT_REFINE, BestMap, best_with_points, map_distortion,
@@ -39,7 +39,7 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
               landmarks_template=None, landmarks_target=None, *, k: int = 100, k_init: int = 40,
               refine: str | None = DEFAULT_REFINE, basis_template: MeshBasis | None = None,
               basis_target: MeshBasis | None = None, refine_options: dict | None = None,
-              hypotheses: int | None = None) -> np.ndarray:
+              hypotheses: int | None = None, alternative: np.ndarray | None = None) -> np.ndarray:
     """Dense map template -> target.
 
     Args:
@@ -58,6 +58,10 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
             None: decided there, ``init.hypotheses_to_refine``: the best two, more when they are close); the
             least distorted refined map is kept (``refine.refine_best``), which resolves the 180-degree turn of
             a body whose front and back look alike.
+        alternative: sparse mode only: (n_s,) int another map of the same pair in original ids (e.g. this
+            function's automatic map), kept instead of the map made from the landmarks when it keeps them (80 %
+            within 0.1 sqrt(area), ``refine.best_with_points``) and is less distorted: given points then never
+            make the map worse than the automatic one.
     Returns:
         (n_s,) int64 target vertex id (original ids) of every template vertex; -1 for template vertices off the
         template's largest connected component (loose pieces, unused vertices: see ``basis``).
@@ -76,4 +80,10 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
                              f"{lt.shape}")
         starts = [map_from_points(S, T, ls, lt, k_init=k_init, k_end=k)]
     maps = [upsample_spectral(S, T, C, p2p_samples) for C, p2p_samples in starts]
-    return map_to_original(S, T, refine_best(S, T, maps, refine, refine_options).p2p)
+    best = refine_best(S, T, maps, refine, refine_options)
+    if alternative is not None:
+        if landmarks_template is None:
+            raise ValueError("alternative: only with landmarks (the automatic mode compares its own hypotheses)")
+        points = (S.to_local(ls, what="template landmark"), T.to_local(lt, what="target landmark"))
+        best = best_with_points(S, T, [best.p2p, map_to_local(S, T, alternative)], *points)
+    return map_to_original(S, T, best.p2p)

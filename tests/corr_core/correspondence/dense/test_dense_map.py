@@ -78,6 +78,22 @@ def test_sparse_map_to_a_pose_is_near_identity_and_refinement_helps(body):
     assert _sides_kept(body, body["Vp"], body["F"], refined, truth)
 
 
+def test_an_alternative_map_replaces_the_points_map_only_when_it_keeps_the_points_and_is_less_distorted(body):
+    """Sparse mode with ``alternative``: the true map (undistorted, keeps the points) wins over the map made from
+    the points; the mirror map (as undistorted on this exactly symmetric body, but it swaps the left and right
+    points) does not; an alternative without points is refused."""
+    truth = np.arange(len(body["V"]))
+    mirror = cKDTree(body["V"]).query(body["V"] * [-1, 1, 1])[1]         # vertex i -> its left/right twin
+    from_points = _run(body, body["Vp"], body["F"], body["T"], sparse_target=body["sparse"])
+    assert not np.array_equal(from_points, truth)
+    assert np.array_equal(_run(body, body["Vp"], body["F"], body["T"], sparse_target=body["sparse"],
+                               alternative=truth), truth)
+    assert np.array_equal(_run(body, body["Vp"], body["F"], body["T"], sparse_target=body["sparse"],
+                               alternative=mirror), from_points)
+    with pytest.raises(ValueError, match="alternative: only with landmarks"):
+        _run(body, body["Vp"], body["F"], body["T"], alternative=truth)
+
+
 def test_automatic_map_to_a_rigidly_moved_pose_keeps_left_and_right(body):
     c, s = np.cos(0.7), np.sin(0.7)
     R = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
