@@ -494,7 +494,7 @@ def subdivide_midpoint(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.nda
 
 def _decimate(V: np.ndarray, F: np.ndarray, fraction: float) -> tuple[np.ndarray, np.ndarray]:
     """Quadric edge-collapse decimation (open3d) to ``fraction`` of the faces; unused vertices removed."""
-    from corr_core._open3d import load_open3d
+    from corr_core.open3d_loader import load_open3d
 
     o3d = load_open3d()
     m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32)))

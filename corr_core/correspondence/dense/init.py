@@ -378,7 +378,7 @@ def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int | None = N
     return (maps, info) if return_info else maps
 
 
-def _ranked(candidates: list[dict], keep_fraction: float = CHIRALITY_POOL) -> list[dict]:
+def rank_candidates(candidates: list[dict], keep_fraction: float = CHIRALITY_POOL) -> list[dict]:
     """Candidates best first: those that keep the assigned points' orientation (chirality agreement above
     ``keep_fraction`` of the best candidate's, and > 0) by increasing WKS disagreement, then the others by
     decreasing chirality agreement.
@@ -392,3 +392,6 @@ def _ranked(candidates: list[dict], keep_fraction: float = CHIRALITY_POOL) -> li
     pool = sorted((c for c, ok in zip(candidates, in_pool) if ok), key=lambda c: c["wks"])
     rest = sorted((c for c, ok in zip(candidates, in_pool) if not ok), key=lambda c: -c["chirality"])
     return pool + rest
+
+
+_ranked = rank_candidates   # the name ``automatic_hypotheses`` calls it by
