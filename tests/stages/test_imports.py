@@ -1,4 +1,4 @@
-"""The engine's import structure (issue 24): no module imports another's ``_private`` names, and no import cycle,
+"""The engine's import structure: no module imports another's ``_private`` names, and no import cycle,
 counting imports inside functions (an import moved into a function to dodge a cycle is still a cycle)."""
 from __future__ import annotations
 

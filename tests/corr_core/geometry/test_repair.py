@@ -73,8 +73,9 @@ def test_published_chair_loads_renders_at_normal_size_and_reports(tmp_path):
     assert clean["repairs"] == [] or all(r["level"] == "note" for r in clean["repairs"])
 
 
-def test_duplicated_face_pair_no_longer_rejects_a_correspondence_mesh(tmp_path):
-    """Was: '2 non-manifold edge(s) shared by more than two faces' and the mesh was rejected."""
+def test_a_duplicated_face_pair_is_dropped_and_the_correspondence_mesh_kept(tmp_path):
+    """A face repeated in both orientations is dropped, not taken for '2 non-manifold edge(s) shared by more than
+    two faces' that would reject the mesh."""
     from shapecorr.correspondence import mesh
 
     V, F = sphere(300)
@@ -192,8 +193,8 @@ def test_vertex_ids_survive_junk_vertices_before_and_among_the_real_ones():
 
 @pytest.mark.parametrize("far", [1e30, -1e13])
 def test_a_used_vertex_out_of_range_is_named(far):
-    """A face using a vertex at 1e30 used to be reported as "no valid face left after removing degenerate and
-    zero-area faces" (the bounding box dwarfed every face); now the vertex is named."""
+    """A face using a vertex at 1e30 is an error naming the vertex, not "no valid face left after removing
+    degenerate and zero-area faces" (a bounding box that dwarfs every face)."""
     V = TET_V.copy()
     V[2, 1] = far
     with pytest.raises(MeshError, match=r"ball\.obj: vertex 2 \(0-based: vertex number 3 of the file\) is out of "
