@@ -17,11 +17,11 @@ def test_no_import_cycle_in_the_shape_code():
     assert cycle is None, " -> ".join(cycle)
 
 
-def _package(tmp_path, files: dict[str, str]):
+def _package(tmp_path, files: dict[str, str], scanned: tuple[str, ...] = ()):
     for path, text in files.items():
         (tmp_path / path).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / path).write_text(textwrap.dedent(text))
-    return graph(("pkg",), root=tmp_path)
+    return graph(("pkg",), scanned=scanned, root=tmp_path)
 
 
 def test_an_import_inside_a_function_closes_a_cycle(tmp_path):
@@ -43,3 +43,9 @@ def test_private_names_imported_or_read_from_another_module_are_found(tmp_path):
                                      "pkg/a.py": "def _x(): pass\n_y = 1\n",
                                      "pkg/b.py": "from pkg.a import _x\nfrom pkg import a\nz = a._y\n"})
     assert private == ["pkg.b: from pkg.a import _x", "pkg.b: a._y"]
+
+
+def test_a_private_module_is_private_to_its_top_level_package(tmp_path):
+    files = {"pkg/__init__.py": "", "pkg/_hidden.py": "def f(): pass\n", "pkg/a.py": "from pkg._hidden import f\n",
+             "tool/run.py": "from pkg._hidden import f\n"}
+    assert _package(tmp_path, files, scanned=("tool",))[1] == ["tool.run: imports the private module pkg._hidden"]
