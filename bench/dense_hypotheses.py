@@ -51,7 +51,7 @@ def score_candidates(S, T, V_t, F_t, truth, landmarks, n_candidates: int) -> lis
 
     maps, info = init.automatic_hypotheses(S, T, n_candidates, k_init=SETTINGS["k_init"], k_end=SETTINGS["k"],
                                            return_info=True)
-    ranked = init._ranked(info["candidates"])
+    ranked = init.rank_candidates(info["candidates"])
     solver = GeodesicSolver(V_t, F_t)
     rows = []
     for c, (C, p2p) in zip(ranked, maps):

@@ -15,7 +15,7 @@ import numpy as np
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from corr_core._open3d import load_open3d  # noqa: E402
+from corr_core.open3d_loader import load_open3d  # noqa: E402
 from corr_core.alignment.hog import hog_dollar, hog_features, hog_skimage  # noqa: E402
 from corr_core.geometry.mesh_io import normalize_mesh  # noqa: E402
 from corr_core.alignment.render import render_views  # noqa: E402

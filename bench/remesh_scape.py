@@ -49,7 +49,7 @@ def decimate(V: np.ndarray, F: np.ndarray, n_vertices: int) -> tuple[np.ndarray,
     """Open3D quadric decimation of (V (n,3), F (m,3)) to 2 * n_vertices triangles, then cleaned: the largest
     connected component, no unreferenced vertex. Returns V2 (n2,3) float64, F2 (m2,3) int64, vertices in
     Open3D's order."""
-    from corr_core._open3d import load_open3d
+    from corr_core.open3d_loader import load_open3d
     from corr_core.geometry.primitives import largest_component
 
     o3d = load_open3d()
@@ -101,7 +101,7 @@ def exact_map(V_template_new: np.ndarray, V_template: np.ndarray, F_template: np
     """Remeshed template vertices (n_s,3) -> closest points on the original template (V_template (n,3),
     F_template (m,3)) -> the same barycentric points of the original pose (V_pose (n,3), same triangles) ->
     nearest remeshed pose vertex of V_pose_new (n_t,3): (n_s,) int64 (Open3D's closest-point query)."""
-    from corr_core._open3d import load_open3d
+    from corr_core.open3d_loader import load_open3d
 
     o3d = load_open3d()
     scene = o3d.t.geometry.RaycastingScene()

@@ -65,7 +65,7 @@ def views(files, *, n_views: int = 16, image_size: int = 120, elevation_deg: flo
 
     files: a list with one mesh path, or the shape's NNN_V.png paths in view order.
     Returns {"views": (V, S, S) uint8 grayscale (255 = white background), "kind": "mesh"|"views",
-    "repairs": [record] of the mesh repairs (``corr_core.geometry.repair``; [] for views)}.
+    "repairs": [dict] of the mesh repairs (``corr_core.geometry.repair.RepairRecord.as_dict``; [] for views)}.
     """
     files = [files] if isinstance(files, str) else list(files)
     kind = _input_kind(files)
@@ -82,7 +82,7 @@ def views(files, *, n_views: int = 16, image_size: int = 120, elevation_deg: flo
     if not np.all(np.isfinite(images)):
         raise ValueError(f"{files[0]}: views contain NaN values")
     return {"views": np.clip(np.rint(images * 255.0), 0, 255).astype(np.uint8), "kind": kind,
-            "repairs": repairs if kind == "mesh" else []}
+            "repairs": [r.as_dict() for r in repairs] if kind == "mesh" else []}
 
 
 @register("align.hog", group="alignment", fanout="item")

@@ -35,7 +35,7 @@ def mesh(path, *, item_name: str | None = None) -> dict:
     their ids, and every method ignores them: ``corr_core.geometry.intrinsic.IntrinsicMesh``).
 
     Returns {"V": (n,3) float64 all vertices in file order, "F": (m,3) int64 repaired faces of the largest
-    component, "area": float (of F), "name": file name, "item": item name, "warnings": [str], "repairs": [record]
+    component, "area": float (of F), "name": file name, "item": item name, "warnings": [str], "repairs": [dict]
     (``corr_core.geometry.repair``: what was dropped / flipped / ignored, each naming the file)}. ``item_name`` puts
     the item in the cache key: two files with the same content get their own entries, each with its own name
     (by which the per-mesh files landmarks/<mesh>.txt and ground_truth/<mesh>.txt are found).
@@ -46,7 +46,7 @@ def mesh(path, *, item_name: str | None = None) -> dict:
     warn_repairs(repairs)
     warnings = meshcheck.check_correspondence_mesh(V, F, name=name, allow_unreferenced=True)
     return {"V": V, "F": F.astype(np.int64), "area": surface_area(V, F), "name": name, "item": item_name,
-            "warnings": list(warnings), "repairs": repairs}
+            "warnings": list(warnings), "repairs": [r.as_dict() for r in repairs]}
 
 
 @register("corr.spectral", group="correspondence", fanout="item")

@@ -36,6 +36,7 @@ from corr_core.geometry.sampling import farthest_point_samples
 from stages.registry import register
 
 from .landmark_sources import mesh_landmarks, numbered_like_template, sparse_positions
+from .skips import is_skipped, skip_reason, skip_reasons, skipped
 
 METHODS = ("dense_sparse", "dense_auto")
 KIM_LABELS = {"mobius": "Möbius (best map)", "dense_sparse": "dense_sparse (5 points)",
@@ -77,7 +78,7 @@ def dense_init(template_basis, target_basis, template_mesh, target_mesh, landmar
                hypotheses: int | None = None) -> dict:
     """Initial map template -> target: a functional map refined by ZoomOut and the point map of the template
     samples. mode "sparse": from the sparse landmarks given on both meshes (a target without landmarks is
-    skipped: {"skipped": why}); "auto": from nothing on the target (extremities, orientation-aware), with the
+    skipped: ``skips.skipped(why)``); "auto": from nothing on the target (extremities, orientation-aware), with the
     next ranked maps too, for ``corr.dense_refine`` to choose from after refinement (``automatic_hypotheses``:
     how many is decided there when ``hypotheses`` is None -- the best two, more when they are close; an
     integer forces that many, e.g. 1 to time a single hypothesis).
@@ -101,7 +102,7 @@ def dense_init(template_basis, target_basis, template_mesh, target_mesh, landmar
         return out
     target_ids, source = mesh_landmarks(target_mesh, landmarks, landmark_files, template_mesh)
     if target_ids is None:
-        return {"skipped": f"{source} (dense_sparse needs the sparse landmarks on the target)"}
+        return skipped(f"{source} (dense_sparse needs the sparse landmarks on the target)")
     template_ids, _ = mesh_landmarks(template_mesh, landmarks, landmark_files, template_mesh)
     sparse = sparse_positions(landmarks, sparse_landmarks)
     C, p2p = dense.map_from_points(S, T, template_ids[sparse], target_ids[sparse], k_init=k_init, k_end=k_end)
@@ -124,11 +125,11 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *, ref
     (h,) ``map_distortion`` of every refined hypothesis, "confidence": float in [0, 1], no ground truth needed
     (several hypotheses: ``BestMap.confidence``, the kept map's distortion margin over the runner-up; given
     points: ``points_agreement``, the fraction of them the map keeps; absent with a single automatic
-    hypothesis)} or {"skipped": why}. With given points and an ``alternative`` (another ``corr.dense_refine``
+    hypothesis)} or ``skips.skipped(why)``. With given points and an ``alternative`` (another ``corr.dense_refine``
     result of the same pair, e.g. dense_auto's), that map is kept instead when it keeps the given points and is
     less distorted (``refine.best_with_points``; "hypothesis": "alternative"): points never make a map worse."""
-    if "skipped" in initial:
-        return {"skipped": initial["skipped"]}
+    if is_skipped(initial):
+        return skipped(skip_reason(initial))
     S, T = _basis(template_basis, "template"), _basis(target_basis, "target")
     starts = [(initial["C"], initial["p2p_samples"])]
     if "C_more" in initial:
@@ -279,16 +280,12 @@ def dense_measures(template_mesh, target_mesh, landmarks, landmark_files=None, g
     return out
 
 
-def _skipped(results: dict | None) -> dict:
-    return {m: r["skipped"] for m, r in sorted((results or {}).items()) if "skipped" in r}
-
-
 def _per_mesh_rows(method: str, results: dict | None, per_mesh: dict) -> dict:
     """{mesh: {"mean_error": float | None (no ground truth), "landmark_accuracy": float | None,
     "confidence": float | None}} of one method's maps (skipped meshes left out)."""
     rows = {}
     for m, r in sorted((results or {}).items()):
-        if "vertex_map" not in r:
+        if is_skipped(r):
             continue
         measured = per_mesh.get(m, {})
         errors = measured.get("errors", {}).get(method)
@@ -321,8 +318,8 @@ def dense_reports(names: list[str], dense_sparse, dense_auto, per_mesh, out_dir:
     per_mesh = dict(sorted((per_mesh or {}).items()))
     preds = {method: {m: np.asarray(r["nearest"][method]) for m, r in per_mesh.items()
                       if method in r.get("nearest", {})} for method in METHODS}
-    out: dict = {"dense_skipped": {k: v for k, v in (("dense_sparse", _skipped(dense_sparse)),
-                                                     ("dense_auto", _skipped(dense_auto))) if v},
+    out: dict = {"dense_skipped": {k: v for k, v in (("dense_sparse", skip_reasons(dense_sparse)),
+                                                     ("dense_auto", skip_reasons(dense_auto))) if v},
                  "dense_not_measured": {m: r["no_truth"] for m, r in per_mesh.items() if "no_truth" in r}}
     errors = {method: np.concatenate([r["errors"][method] for r in per_mesh.values()
                                       if method in r.get("errors", {})] or [np.zeros(0)])

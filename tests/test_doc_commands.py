@@ -1,4 +1,4 @@
-"""Every ``--set`` / ``--grid`` key in README.md and docs/*.md names a parameter that exists (issue 22 item 5).
+"""Every ``--set`` / ``--grid`` key in README.md and docs/*.md names a parameter that exists.
 
 A documented command line (``python -m stages CMD PIPELINE ... --set k=v``, in a code block or an inline code
 span, lines joined where a span or a ``\\`` continuation wraps) is checked against the pipeline it names: the

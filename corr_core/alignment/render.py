@@ -25,7 +25,7 @@ import functools
 
 import numpy as np
 
-from corr_core._open3d import load_open3d
+from corr_core.open3d_loader import load_open3d
 from corr_core.geometry.primitives import face_normals, rotation_about_y
 
 

@@ -6,7 +6,7 @@ can be fixed by changing only the *faces*: vertex ``i`` stays vertex ``i``, so g
 matches vertex i" and landmark vertex ids survive. Vertices that no face uses afterwards are simply ignored
 (``normalize_mesh`` and the renderer use referenced vertices only).
 
-Every finding is a record (a plain, JSON-ready dict)::
+Every finding is a ``RepairRecord``; ``as_dict()`` gives its stored, JSON-ready form::
 
     {"file": name, "kind": "duplicate_faces", "action": "dropped", "count": 2, "level": "repair",
      "message": "scan.obj: dropped 2 duplicate faces ..."}
@@ -17,6 +17,7 @@ What cannot be made usable raises ``MeshError`` with the reason and the fix.
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import logging
 import os
@@ -30,12 +31,29 @@ from corr_core.geometry.primitives import edge_keys, face_areas, half_edges, uni
 
 log = logging.getLogger(__name__)
 
-__all__ = ["repair_mesh", "load_repaired_mesh", "orient_faces", "warn_repairs", "repair_messages", "compact_mesh"]
+__all__ = ["RepairRecord", "repair_mesh", "load_repaired_mesh", "orient_faces", "warn_repairs", "repair_messages",
+           "compact_mesh"]
 
 
-def _record(name: str, kind: str, action: str, count: int, level: str, message: str) -> dict:
-    return {"file": name, "kind": kind, "action": action, "count": int(count), "level": level,
-            "message": f"{name}: {message}"}
+@dataclasses.dataclass(frozen=True)
+class RepairRecord:
+    """One finding of ``repair_mesh``: in ``file``, ``count`` of ``kind`` (e.g. "duplicate_faces") were
+    ``action`` ("dropped", "flipped", "kept", "ignored"); ``level`` "repair", "warning" or "note" (module
+    docstring); ``message`` the sentence for the log, naming the file."""
+    file: str
+    kind: str
+    action: str
+    count: int
+    level: str
+    message: str
+
+    def as_dict(self) -> dict:
+        """The record as stage results store it: {"file", "kind", "action", "count", "level", "message"}."""
+        return dataclasses.asdict(self)
+
+
+def _record(name: str, kind: str, action: str, count: int, level: str, message: str) -> RepairRecord:
+    return RepairRecord(name, kind, action, int(count), level, f"{name}: {message}")
 
 
 def _bbox_diagonal2(V: np.ndarray, F: np.ndarray) -> float:
@@ -224,7 +242,7 @@ def _report_boundary(F: np.ndarray, name: str, records: list) -> None:
 
 
 def repair_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", *, keep_largest_component: bool = False,
-                orient: bool = True, area_tol: float = 1e-12) -> tuple[np.ndarray, list[dict]]:
+                orient: bool = True, area_tol: float = 1e-12) -> tuple[np.ndarray, list[RepairRecord]]:
     """Repair the faces of a mesh; vertices and their ids are never changed.
 
     Steps, each reported when it finds something: drop faces repeating a vertex; drop duplicate faces (same
@@ -240,14 +258,14 @@ def repair_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", *, keep_larges
         area_tol: a face is zero-area when area <= area_tol * (bounding-box diagonal)^2.
     Returns:
         F2: (m2,3) int64 repaired faces (a subset of the rows of F, some with their vertex order reversed);
-        records: list of dicts (see the module docstring), in the order of the steps.
+        records: list of ``RepairRecord``, in the order of the steps.
     Raises:
         MeshError: no faces, out-of-range indices, NaN/inf coordinates of a used vertex, or no valid face left.
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
     check_mesh(V, F, name=name)
-    records: list[dict] = []
+    records: list[RepairRecord] = []
     file_ids = np.arange(len(F))
     for step in (_drop_repeated_index, _drop_duplicates, functools.partial(_drop_zero_area, V, area_tol=area_tol)):
         if len(F):
@@ -266,7 +284,7 @@ def repair_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", *, keep_larges
 
 
 def load_repaired_mesh(path: str | os.PathLike, *, keep_largest_component: bool = False, orient: bool = True,
-                       name: str | None = None) -> tuple[np.ndarray, np.ndarray, list[dict]]:
+                       name: str | None = None) -> tuple[np.ndarray, np.ndarray, list[RepairRecord]]:
     """``load_mesh`` then ``repair_mesh``: (V (n,3) float64 in file order, F (m,3) int64 repaired, records).
 
     name: how messages name the file (default: the path).
@@ -277,12 +295,12 @@ def load_repaired_mesh(path: str | os.PathLike, *, keep_largest_component: bool 
     return V, F, records
 
 
-def repair_messages(records: list[dict], levels: tuple = ("repair", "warning")) -> list[str]:
+def repair_messages(records: list[RepairRecord], levels: tuple = ("repair", "warning")) -> list[str]:
     """The messages of the records whose level is in ``levels``."""
-    return [r["message"] for r in records if r["level"] in levels]
+    return [r.message for r in records if r.level in levels]
 
 
-def warn_repairs(records: list[dict], levels: tuple = ("repair", "warning")) -> None:
+def warn_repairs(records: list[RepairRecord], levels: tuple = ("repair", "warning")) -> None:
     """One log message (``logging`` warning of this module's logger) per repair / remaining defect, one line each
     naming the file (``008.obj: dropped 4,780 duplicate faces ...``)."""
     for message in repair_messages(records, levels):

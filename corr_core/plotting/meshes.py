@@ -13,7 +13,7 @@ import os
 
 import numpy as np
 
-from corr_core._open3d import load_open3d
+from corr_core.open3d_loader import load_open3d
 from corr_core.alignment.render import camera_frames, view_rays
 from corr_core.geometry.primitives import face_normals
 from corr_core.plotting.charts import pyplot

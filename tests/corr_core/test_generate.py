@@ -189,7 +189,7 @@ def test_humanoid_closed_manifold_sphere(human):
     assert connected_components(A, directed=False)[0] == 1
     assert len(np.unique(F.ravel())) == len(V)  # no unused vertices
     # vertex-manifold: around each vertex the faces form a single fan (link is one cycle)
-    from corr_core._open3d import load_open3d
+    from corr_core.open3d_loader import load_open3d
     o3d = load_open3d()
     m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32)))
     assert m.is_vertex_manifold() and m.is_edge_manifold()

@@ -238,9 +238,9 @@ def _flip_one_edge(V, F):
 
 
 def test_only_the_template_triangles_keep_the_landmark_truth(tmp_path, humanoid, dask_client):
-    """Vertex ids name the same points only on a mesh with the template's triangles (issue 22 item 1): a vertex
+    """Vertex ids name the same points only on a mesh with the template's triangles: a vertex
     count never decides. A face split (one vertex more), one flipped edge or shuffled vertex ids (same counts)
-    lose the truth; faces reordered or 2 unused vertices appended (issue 21 item 11) keep it."""
+    lose the truth; faces reordered or 2 unused vertices appended keep it."""
     p = _project(tmp_path, humanoid, dask_client, copy_data=True)
     test_dir = tmp_path / "humans" / "meshes" / "test"
     n = humanoid["info"]["n_vertices"]

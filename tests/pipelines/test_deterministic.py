@@ -1,6 +1,6 @@
 """Same inputs, same results: two cold runs of the default pipeline (every stage, the default counts), in
-separate caches, one with 2 workers and one with 1, give byte-identical `results --json` (issue 14 item 4: eigsh
-had no fixed start vector, and accuracy.descriptor took five different values over eleven clean runs).
+separate caches, one with 2 workers and one with 1, give byte-identical `results --json` (the eigensolvers start
+from a fixed vector: from ARPACK's random start, accuracy.descriptor took five different values over eleven runs).
 
 The 2-worker run is the session's shared audited cold run (``default_cold_run``, conftest.py); the 1-worker run
 is made here, from nothing, in a folder of its own."""

@@ -86,7 +86,7 @@ def test_gc_leaves_entries_no_recorded_run_used_to_all(tmp_path, monkeypatch):
     assert res["removed"] == 2 and {tuple(e["pipelines"]) for e in res["entries"]} == {("no recorded pipeline",)}
 
 
-# --- issue 21 item 2: a folder is adopted as a cache only when it holds exactly what the engine writes ---
+# --- a folder is adopted as a cache only when it holds exactly what the engine writes ---
 
 import os  # noqa: E402
 import shutil  # noqa: E402

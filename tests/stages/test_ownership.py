@@ -121,7 +121,7 @@ def test_gc_removes_only_what_the_engine_created(project, tmp_path):
     assert (cache / "manifest" / "zz" / "notes.json").is_file()
 
 
-# --- issue 21 item 1: the engine's own files in the output folder, and folders it must never publish into ---
+# --- the engine's own files in the output folder, and folders it must never publish into ---
 
 def test_a_users_metrics_json_is_never_replaced(project, tmp_path, capsys):
     """A metrics.json of the user's in the output folder (there before the first run, or put in place of the

@@ -1,4 +1,4 @@
-"""Results from Python and on the command line (issue 22 item 3): ``api.result`` returns one stage's stored
+"""Results from Python and on the command line: ``api.result`` returns one stage's stored
 result for an item; ``results`` prints the headline keys first, then the rest, keys with spaces quoted."""
 from __future__ import annotations
 

@@ -339,7 +339,7 @@ def test_the_report_names_the_cache_url_and_its_local_folder(project, tmp_path):
     assert str(tmp_path / "local") in rows["cache local folder"]
 
 
-# --- issue 21 item 6: a store that does not answer, or refuses the client, is an error line, never a traceback ---
+# --- a store that does not answer, or refuses the client, is an error line, never a traceback ---
 
 def _no_retries(env: dict) -> dict:
     """botocore retries a refused connection for ~20 s by default: once is enough here."""

@@ -67,7 +67,7 @@ def _reference_bomb(levels: int, as_list: bool) -> str:
 @pytest.mark.parametrize("as_list", [False, True], ids=["string", "list"])
 def test_a_reference_bomb_fails_fast_naming_the_key(tmp_path, as_list):
     """11 levels of ten ${...} references each (10**11 copies): an error naming the parameter that grows too
-    large, within seconds (it used to hang), like the alias bomb."""
+    large, within seconds (not a hang), like the alias bomb."""
     p = tmp_path / "bomb.yaml"
     p.write_text(_reference_bomb(11, as_list))
     _fails(cli_main(["status", str(p)], tmp_path), 2, "expands to more than", "bomb.yaml:")  # first: a hang
@@ -273,7 +273,7 @@ def test_the_local_dashboard_listens_on_localhost_only(dask_client):
     assert dask_client.cluster.dashboard_link.startswith("http://127.0.0.1:")
 
 
-# ---- issue 21 item 10: ~ and $VAR in path options -----------------------------------------------------
+# ---- ~ and $VAR in path options -----------------------------------------------------------------------
 def test_tilde_and_variables_in_path_options_are_expanded(project, tmp_path):
     """--cache '~/c', --out '$OUT_BASE/o', --summary-json '~/s.json' and report --out '${OUT_BASE}/r.html' (quoted,
     so no shell expanded them): the engine expands them, and creates no folder literally named '~' or '$...'."""

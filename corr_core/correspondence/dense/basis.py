@@ -187,19 +187,19 @@ def basis_eigenpairs(L, M, k: int, area: float) -> tuple[np.ndarray, np.ndarray]
     L, M = L.tocsc(), M.tocsc()
     sigma = 0.4 * 4.0 * np.pi * k / max(area, 1e-300)
     try:
-        evals, evecs = _shift_invert_eigsh(L, M, k, sigma)
+        evals, evecs = _shift_invert_eigsh(L, M, k, sigma=sigma)
         found_bottom = np.max(np.abs(evals - sigma)) >= sigma * (1.0 - 1e-9)   # the k nearest reach down to 0
     except (sla.ArpackNoConvergence, RuntimeError):
         found_bottom = False
     if not found_bottom:
-        evals, evecs = _shift_invert_eigsh(L, M, k, -1e-6)
+        evals, evecs = _shift_invert_eigsh(L, M, k, sigma=-1e-6)   # just below 0: L - sigma M is regular
     order = np.argsort(evals, kind="stable")
     evals, evecs = np.maximum(evals[order], 0.0), evecs[:, order]
     norms = np.sqrt(np.einsum("ik,ik->k", evecs, M @ evecs))
     return evals, evecs / norms
 
 
-def _shift_invert_eigsh(L, M, k: int, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+def _shift_invert_eigsh(L, M, k: int, *, sigma: float) -> tuple[np.ndarray, np.ndarray]:
     """The k eigenpairs of ``L phi = lambda M phi`` nearest ``sigma`` (unsorted), fixed start vector."""
     lu = sla.splu((L - sigma * M).tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
                   options={"SymmetricMode": True})

@@ -144,7 +144,7 @@ class _Target:
     def nearest_vertices(self, X: np.ndarray, normals_X: np.ndarray, fallback: np.ndarray, k: int = 8) -> np.ndarray:
         """Nearest target vertex to each deformed vertex X (n,3) (normals (n,3)) among its ``k`` nearest whose
         normal faces the same side (cosine > 0); ``fallback`` (n,) int where none does."""
-        ids, d = nearest_compatible(self.tree, self.normals, X, normals_X, 0.0, k=k)
+        ids, d = nearest_compatible(self.tree, self.normals, X, normals_X, min_cos=0.0, k=k)
         return np.where(np.isfinite(d), ids, fallback)
 
 

@@ -49,7 +49,7 @@ MAX_HYPOTHESES = 3
 HYPOTHESIS_WKS_RATIO = 1.10
 
 
-def point_features(basis: MeshBasis, points: np.ndarray, chirality_weight: float = CHIRALITY_WEIGHT,
+def point_features(basis: MeshBasis, points: np.ndarray, *, chirality_weight: float = CHIRALITY_WEIGHT,
                    scales=LOCAL_SCALES, distances: np.ndarray | None = None) -> np.ndarray:
     """Vertex functions that follow from a few labelled points.
 
@@ -68,7 +68,7 @@ def point_features(basis: MeshBasis, points: np.ndarray, chirality_weight: float
     return np.concatenate([d] + local + [chirality_weight * fmaps.chirality_functions(basis, d)], axis=1)
 
 
-def fmap_from_points(source: MeshBasis, target: MeshBasis, points_source: np.ndarray, points_target: np.ndarray,
+def fmap_from_points(source: MeshBasis, target: MeshBasis, points_source: np.ndarray, points_target: np.ndarray, *,
                      k: int = 40, w_lap: float = 0.1, w_orient: float = 0.0, features=None) -> np.ndarray:
     """Functional map (k x k, template x target) fitted to the point features of corresponding points.
 
@@ -88,7 +88,7 @@ def fmap_from_points(source: MeshBasis, target: MeshBasis, points_source: np.nda
                                     w_orient=w_orient)
 
 
-def map_from_points(source: MeshBasis, target: MeshBasis, points_source, points_target, k_init: int = 40,
+def map_from_points(source: MeshBasis, target: MeshBasis, points_source, points_target, *, k_init: int = 40,
                     k_end: int = 100, step: int = 2, features=None, n_zoomout: int | None = 2000,
                     all_target_vertices: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Functional map from corresponding points, refined by ZoomOut on the samples.
@@ -103,7 +103,8 @@ def map_from_points(source: MeshBasis, target: MeshBasis, points_source, points_
     points_source = source.to_local(points_source, what="template point")
     points_target = target.to_local(points_target, what="target point")
     C = fmap_from_points(source, target, points_source, points_target, k=k_init, features=features)
-    return _zoomout_and_match(source, target, C, k_end, step, n_zoomout, all_target_vertices)
+    return _zoomout_and_match(source, target, C, k_end=k_end, step=step, n_zoomout=n_zoomout,
+                              all_target_vertices=all_target_vertices)
 
 
 def _zoomout_and_match(source: MeshBasis, target: MeshBasis, C: np.ndarray, k_end: int, step: int,
@@ -117,7 +118,7 @@ def _zoomout_and_match(source: MeshBasis, target: MeshBasis, C: np.ndarray, k_en
     return C, cands[match]
 
 
-def average_geodesic_distance(basis: MeshBasis, n_sources: int = 32) -> np.ndarray:
+def average_geodesic_distance(basis: MeshBasis, *, n_sources: int = 32) -> np.ndarray:
     """Average geodesic distance / sqrt(area) of every vertex to ``n_sources`` farthest-point samples: (n,)."""
     return basis.distances(basis.samples[:n_sources]).mean(axis=0)
 
@@ -134,7 +135,7 @@ def _ring_max(values: np.ndarray, F: np.ndarray, rings: int) -> np.ndarray:
     return out
 
 
-def extremities(basis: MeshBasis, max_points: int = 6, radius: float = 0.25, n_sources: int = 64,
+def extremities(basis: MeshBasis, *, max_points: int = 6, radius: float = 0.25, n_sources: int = 64,
                 neighbourhood: float = 0.1, min_level: float = 0.3) -> np.ndarray:
     """Feature points: local maxima of the average geodesic distance (AGD), far apart (Lipman & Funkhouser 2009
     use such extremal points; on a body they are hands, feet and head).
@@ -146,7 +147,7 @@ def extremities(basis: MeshBasis, max_points: int = 6, radius: float = 0.25, n_s
 
     Returns: (p,) int vertex ids, p <= max_points, decreasing AGD.
     """
-    agd = average_geodesic_distance(basis, n_sources)
+    agd = average_geodesic_distance(basis, n_sources=n_sources)
     E = basis.V[basis.F[:, [1, 2, 0]]] - basis.V[basis.F]
     mean_edge = float(np.linalg.norm(E, axis=2).mean()) / basis.scale
     rings = max(1, int(round(neighbourhood / mean_edge)))
@@ -165,7 +166,7 @@ def extremities(basis: MeshBasis, max_points: int = 6, radius: float = 0.25, n_s
     return np.array(taken, dtype=np.int64)
 
 
-def ranked_assignments(D_source: np.ndarray, D_target: np.ndarray, keep: int = 6,
+def ranked_assignments(D_source: np.ndarray, D_target: np.ndarray, *, keep: int = 6,
                        scale_invariant: bool = False) -> list[tuple[np.ndarray, np.ndarray, float]]:
     """Injective assignments between two small point sets ranked by geodesic distortion.
 
@@ -207,7 +208,7 @@ def _tangent_frames(N: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return t1, np.cross(N, t1)
 
 
-def orientation_agreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarray,
+def orientation_agreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarray, *,
                           neighbours: int = 16) -> float:
     """How much a map keeps the surface orientation, in [-1, 1] (+1: orientation-preserving, -1: a mirror map).
 
@@ -231,7 +232,7 @@ def orientation_agreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.
     return float(np.mean(np.sign(np.linalg.det(np.einsum("pki,pkj->pij", P2, Q2)))))
 
 
-def hks_disagreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarray, n_times: int = 16) -> float:
+def hks_disagreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarray, *, n_times: int = 16) -> float:
     """Mean relative difference of the heat kernel signatures (template's time scale on both meshes) between the
     template samples and their images: it tells the front of a body from its back, which orientation does not
     (the 180-degree turn swapping left/right *and* front/back preserves orientation)."""
@@ -258,7 +259,7 @@ def chirality_agreement(source: MeshBasis, p2p_samples: np.ndarray, chirality_so
     return float(np.sum(cs * ct) / max(np.sqrt(np.sum(cs**2) * np.sum(ct**2)), 1e-300))
 
 
-def wks_disagreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarray, n_energies: int = 50,
+def wks_disagreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarray, *, n_energies: int = 50,
                      variance: float = 6.0) -> float:
     """Mean relative difference |w_S - w_T| / (w_S + w_T) of the wave kernel signatures (Aubry et al. 2011) of the
     template samples and of their images, both on the *template's* log-energy bands (the target's eigenvalues
@@ -292,7 +293,7 @@ def cached_extremities(basis: MeshBasis) -> np.ndarray:
 
 
 def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarray | None = None,
-                  points_target: np.ndarray | None = None, keep: int = 4, k_init: int = 40, k_probe: int = 60,
+                  points_target: np.ndarray | None = None, *, keep: int = 4, k_init: int = 40, k_probe: int = 60,
                   k_end: int = 100, step: int = 2, n_probe: int = 1000, orientation_neighbours: int = 64,
                   return_info: bool = False):
     """A map with no point given on the target (module docstring): the best ranked of
@@ -307,8 +308,8 @@ def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarra
     Returns: (C, p2p_samples) as ``map_from_points``; with ``return_info`` also a dict (points, the chosen
         assignment, every candidate's distortion, orientation agreement, WKS and HKS disagreement and probe map).
     """
-    out = automatic_hypotheses(source, target, 1, points_source, points_target, keep=keep, k_init=k_init,
-                               k_probe=k_probe, k_end=k_end, step=step, n_probe=n_probe,
+    out = automatic_hypotheses(source, target, n=1, points_source=points_source, points_target=points_target,
+                               keep=keep, k_init=k_init, k_probe=k_probe, k_end=k_end, step=step, n_probe=n_probe,
                                orientation_neighbours=orientation_neighbours, return_info=return_info)
     return (*out[0][0], out[1]) if return_info else out[0]
 
@@ -378,7 +379,7 @@ def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int | None = N
     return (maps, info) if return_info else maps
 
 
-def _ranked(candidates: list[dict], keep_fraction: float = CHIRALITY_POOL) -> list[dict]:
+def rank_candidates(candidates: list[dict], keep_fraction: float = CHIRALITY_POOL) -> list[dict]:
     """Candidates best first: those that keep the assigned points' orientation (chirality agreement above
     ``keep_fraction`` of the best candidate's, and > 0) by increasing WKS disagreement, then the others by
     decreasing chirality agreement.
@@ -392,3 +393,6 @@ def _ranked(candidates: list[dict], keep_fraction: float = CHIRALITY_POOL) -> li
     pool = sorted((c for c, ok in zip(candidates, in_pool) if ok), key=lambda c: c["wks"])
     rest = sorted((c for c, ok in zip(candidates, in_pool) if not ok), key=lambda c: -c["chirality"])
     return pool + rest
+
+
+_ranked = rank_candidates   # the name ``automatic_hypotheses`` calls it by

@@ -5,7 +5,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 
-def nearest_compatible(tree: cKDTree, normals_t: np.ndarray, P: np.ndarray, normals_p: np.ndarray,
+def nearest_compatible(tree: cKDTree, normals_t: np.ndarray, P: np.ndarray, normals_p: np.ndarray, *,
                        min_cos: float, k: int = 8) -> tuple[np.ndarray, np.ndarray]:
     """Nearest target vertex to each point P (q,3) among its ``k`` nearest whose normal (n_t,3) makes a cosine
     > ``min_cos`` with the point's normal (q,3): (ids (q,) int, distances (q,) float, inf when none qualifies).

@@ -233,7 +233,8 @@ def _icp_pairs(tree: cKDTree, normals_t: np.ndarray, moved: np.ndarray, patch_no
         d, j = tree.query(moved.reshape(-1, 3))
     else:
         normals = np.einsum("bij,bpj->bpi", R, patch_normals)
-        j, d = nearest_compatible(tree, normals_t, moved.reshape(-1, 3), normals.reshape(-1, 3), normal_cos)
+        j, d = nearest_compatible(tree, normals_t, moved.reshape(-1, 3), normals.reshape(-1, 3),
+                                  min_cos=normal_cos)
     return j.reshape(shape), d.reshape(shape)
 
 
@@ -249,7 +250,7 @@ def _assign(tree: cKDTree, target: MeshBasis, p2p: np.ndarray, moved: np.ndarray
     """Target vertex of every moved template vertex (n_s,3): the nearest normal-compatible one (None), or the
     nearest among the ``n_candidates`` nearest to the current image; the current image where none qualifies."""
     if n_candidates is None:
-        new, d = nearest_compatible(tree, normals_t, moved, moved_normals, 0.0)
+        new, d = nearest_compatible(tree, normals_t, moved, moved_normals, min_cos=0.0)
         return np.where(np.isfinite(d), new, p2p)
     _, cands = tree.query(target.V[p2p], k=min(n_candidates, target.n))
     cands = cands.reshape(len(p2p), -1)

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from corr_core._open3d import load_open3d
+from corr_core.open3d_loader import load_open3d
 from corr_core.alignment.render import camera_frames, render_views
 from corr_core.geometry.primitives import rotate_about_y, rotation_about_y
 

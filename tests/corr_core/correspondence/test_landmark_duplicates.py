@@ -22,7 +22,8 @@ def test_distinct_ids_and_names_are_fine(tmp_path):
 
 
 def test_duplicate_landmark_name_is_an_error_naming_it_and_its_lines(tmp_path):
-    """Issue 21 item 9: a repeated name used to surface later as "lacks the landmarks [...]" of another file."""
+    """A repeated name is an error naming it and its lines, not a "lacks the landmarks [...]" of another file
+    later."""
     path = tmp_path / "landmark_vids.txt"
     path.write_text("1,A\n2,B\n3,A\n")
     with pytest.raises(ValueError, match=r"landmark_vids\.txt:3: landmark name 'A' is listed twice \(lines 1 and 3\)"):

@@ -43,8 +43,8 @@ def test_read_landmarks_is_one_based_only_when_declared(tmp_path):
 
 
 def test_one_typo_id_equal_to_the_vertex_count_is_an_error_not_a_shift(tmp_path):
-    """Issue 21 item 3: a 0-based file with one id == n (a typo) used to be read as 1-based, every landmark
-    shifted by one with only a warning."""
+    """A 0-based file with one id == n (a typo) is an error, not read as 1-based with every landmark shifted by
+    one and only a warning."""
     p = tmp_path / "mesh001.txt"
     p.write_text("5,Head\n3,Left Hand\n10,Right Hand\n7,Left Toe\n")
     with pytest.raises(ValueError, match=r"mesh001.txt:3: vertex id 10 is out of range for a mesh of 10 vertices "
@@ -54,7 +54,7 @@ def test_one_typo_id_equal_to_the_vertex_count_is_an_error_not_a_shift(tmp_path)
 
 
 def test_duplicate_landmark_names_are_named_with_their_lines(tmp_path):
-    """Issue 21 item 9: a name listed twice used to surface later as a missing name."""
+    """A name listed twice is an error naming its lines, not a missing name later."""
     p = tmp_path / "lm.txt"
     p.write_text("1,Head\n2,Left Hand\n3,Head\n")
     with pytest.raises(ValueError, match=r"lm.txt:3: landmark name 'Head' is listed twice \(lines 1 and 3\)"):

@@ -1,6 +1,6 @@
 """A test mesh whose triangles are not the template's has no landmark ground truth from the shared landmark file
 (whatever its vertex count): it is left out of the accuracies with a warning saying why, instead of averaging a
-meaningless 0.0 in. A mesh with the template's triangles and unused vertices appended keeps it (issue 21 item 11)."""
+meaningless 0.0 in. A mesh with the template's triangles and unused vertices appended keeps it."""
 import numpy as np
 import pytest
 

@@ -1,5 +1,5 @@
-"""Same mesh, same eigenpairs, bit for bit: eigsh starts from a fixed vector (was: ARPACK's random start, so
-eigenvectors differed by ~1e-15 between calls and broke ties downstream)."""
+"""Same mesh, same eigenpairs, bit for bit: eigsh starts from a fixed vector (from ARPACK's random start,
+eigenvectors differ by ~1e-15 between calls, which breaks ties downstream)."""
 import numpy as np
 
 from corr_core.geometry import laplacian

@@ -9,7 +9,7 @@ import pytest
 
 from corr_core.generate.chairs import canonical_chair
 from corr_core.geometry.mesh_io import MeshError, save_obj
-from corr_core.geometry.repair import load_repaired_mesh, orient_faces, repair_mesh
+from corr_core.geometry.repair import RepairRecord, load_repaired_mesh, orient_faces, repair_mesh
 from tests.helpers import logged, sphere
 
 
@@ -18,7 +18,8 @@ TET_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
 
 
 def _kinds(records):
-    return {r["kind"]: r for r in records}
+    """{kind: record} of ``RepairRecord``s or of their stored dicts (a stage result's "repairs")."""
+    return {r["kind"]: r for r in (r.as_dict() if isinstance(r, RepairRecord) else r for r in records)}
 
 
 def _published_scan(V, F, flips=(0, 5, 9)):
@@ -47,7 +48,7 @@ def test_published_scan_repairs_are_reported_and_keep_vertex_ids():
     assert kinds["duplicate_faces"]["count"] == 2 and "1 opposite orientation" in kinds["duplicate_faces"]["message"]
     assert kinds["reoriented_faces"]["count"] == 3
     assert kinds["unreferenced_vertices"]["count"] == 11
-    assert all(r["message"].startswith("scan.obj: ") and r["file"] == "scan.obj" for r in records)
+    assert all(r.message.startswith("scan.obj: ") and r.file == "scan.obj" for r in records)
 
 
 def test_published_chair_loads_renders_at_normal_size_and_reports(tmp_path):
@@ -72,8 +73,9 @@ def test_published_chair_loads_renders_at_normal_size_and_reports(tmp_path):
     assert clean["repairs"] == [] or all(r["level"] == "note" for r in clean["repairs"])
 
 
-def test_duplicated_face_pair_no_longer_rejects_a_correspondence_mesh(tmp_path):
-    """Was: '2 non-manifold edge(s) shared by more than two faces' and the mesh was rejected."""
+def test_a_duplicated_face_pair_is_dropped_and_the_correspondence_mesh_kept(tmp_path):
+    """A face repeated in both orientations is dropped, not taken for '2 non-manifold edge(s) shared by more than
+    two faces' that would reject the mesh."""
     from shapecorr.correspondence import mesh
 
     V, F = sphere(300)
@@ -170,7 +172,7 @@ def test_load_repaired_mesh_reads_and_repairs(tmp_path):
         V2, F2, records = load_repaired_mesh(tmp_path / "m.obj")
     assert len(V2) == len(V)
     np.testing.assert_array_equal(F2, F)
-    assert records[0]["kind"] == "duplicate_faces" and str(tmp_path / "m.obj") in records[0]["message"]
+    assert records[0].kind == "duplicate_faces" and str(tmp_path / "m.obj") in records[0].message
 
 
 def test_vertex_ids_survive_junk_vertices_before_and_among_the_real_ones():
@@ -191,8 +193,8 @@ def test_vertex_ids_survive_junk_vertices_before_and_among_the_real_ones():
 
 @pytest.mark.parametrize("far", [1e30, -1e13])
 def test_a_used_vertex_out_of_range_is_named(far):
-    """A face using a vertex at 1e30 used to be reported as "no valid face left after removing degenerate and
-    zero-area faces" (the bounding box dwarfed every face); now the vertex is named."""
+    """A face using a vertex at 1e30 is an error naming the vertex, not "no valid face left after removing
+    degenerate and zero-area faces" (a bounding box that dwarfs every face)."""
     V = TET_V.copy()
     V[2, 1] = far
     with pytest.raises(MeshError, match=r"ball\.obj: vertex 2 \(0-based: vertex number 3 of the file\) is out of "

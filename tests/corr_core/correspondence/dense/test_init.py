@@ -57,6 +57,6 @@ def test_ranking_rejects_mirror_and_twisted_maps_then_takes_the_best_wks():
              {"name": "twist", "chirality": 0.45, "wks": 0.020},
              {"name": "true", "chirality": 0.80, "wks": 0.030},
              {"name": "turn", "chirality": 0.78, "wks": 0.035}]
-    assert [c["name"] for c in init._ranked(cands)] == ["true", "turn", "twist", "mirror"]
+    assert [c["name"] for c in init.rank_candidates(cands)] == ["true", "turn", "twist", "mirror"]
     all_negative = [dict(c, chirality=-abs(c["chirality"]) - 0.1) for c in cands]   # twist: -0.55, the highest
-    assert init._ranked(all_negative)[0]["name"] == "twist"           # the one that keeps the orientation most
+    assert init.rank_candidates(all_negative)[0]["name"] == "twist"           # the one that keeps the orientation most
