@@ -37,6 +37,7 @@ from corr_core.geometry.primitives import vertex_adjacency
 
 LOCAL_SCALES = (0.1, 0.2, 0.4)       # widths of exp(-(d/s)^2), units sqrt(area)
 CHIRALITY_WEIGHT = 0.3
+ZOOMOUT_SAMPLES = 2000           # template samples (and target samples or vertices) ZoomOut iterates on
 CHIRALITY_POOL = 2 / 3          # candidates kept: chirality agreement above this fraction of the best's
 # How many ranked initial maps the automatic mode refines (``hypotheses_to_refine``): always the best two (the
 # second is the reference of the map's confidence, ``refine.BestMap``), and any further candidate of the chirality
@@ -89,7 +90,7 @@ def fmap_from_points(source: MeshBasis, target: MeshBasis, points_source: np.nda
 
 
 def map_from_points(source: MeshBasis, target: MeshBasis, points_source, points_target, *, k_init: int = 40,
-                    k_end: int = 100, step: int = 2, features=None, n_zoomout: int | None = 2000,
+                    k_end: int = 100, step: int = 2, features=None, n_zoomout: int | None = ZOOMOUT_SAMPLES,
                     all_target_vertices: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Functional map from corresponding points, refined by ZoomOut on the samples.
 
@@ -107,7 +108,7 @@ def map_from_points(source: MeshBasis, target: MeshBasis, points_source, points_
                               all_target_vertices=all_target_vertices)
 
 
-def _zoomout_and_match(source: MeshBasis, target: MeshBasis, C: np.ndarray, k_end: int, step: int,
+def _zoomout_and_match(source: MeshBasis, target: MeshBasis, C: np.ndarray, *, k_end: int, step: int,
                        n_zoomout: int | None, all_target_vertices: bool) -> tuple[np.ndarray, np.ndarray]:
     """ZoomOut, then the target vertex of every template sample: (C (k_end, k_end), (s,) int)."""
     C = zoomout.zoomout(source, target, C, k_end=k_end, step=step, n_source=n_zoomout, n_target=n_zoomout,
@@ -317,7 +318,7 @@ def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarra
 def hypotheses_to_refine(ranked: list[dict], keep_fraction: float = CHIRALITY_POOL,
                          wks_ratio: float = HYPOTHESIS_WKS_RATIO, at_least: int = MIN_HYPOTHESES,
                          at_most: int = MAX_HYPOTHESES) -> int:
-    """How many of the ranked candidates (``_ranked``: dicts with "chirality" and "wks") to refine: at least
+    """How many of the ranked candidates (``rank_candidates``: dicts with "chirality" and "wks") to refine: at least
     ``at_least`` (when there are that many), plus those in the chirality pool whose WKS disagreement is within
     ``wks_ratio`` times the best's, at most ``at_most``."""
     if not ranked:
@@ -334,7 +335,7 @@ def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int | None = N
                          points_target: np.ndarray | None = None, keep: int = 4, k_init: int = 40,
                          k_probe: int = 60, k_end: int = 100, step: int = 2, n_probe: int = 1000,
                          orientation_neighbours: int = 64, return_info: bool = False):
-    """The best ranked automatic maps (``_ranked``: ``map_automatic``'s choice first, then the next in the
+    """The best ranked automatic maps (``rank_candidates``: ``map_automatic``'s choice first, then the next in the
     same order), each taken on to ``k_end``: ``n`` of them, or when ``n`` is None as many as
     ``hypotheses_to_refine`` decides (the best two, more when they are close). The true map and the 180-degree
     turn of a body whose front and back look alike both come out, and ``refine.refine_best`` keeps the one that
@@ -371,11 +372,12 @@ def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int | None = N
             candidate["orientation"] = orientation_agreement(source, target, p2p, neighbours=orientation_neighbours)
             candidate["hks"] = hks_disagreement(source, target, p2p)
         info["candidates"].append(candidate)
-    ranked = _ranked(info["candidates"])
+    ranked = rank_candidates(info["candidates"])
     ranked = ranked[:hypotheses_to_refine(ranked) if n is None else int(n)]
     s, t = ranked[0]["source"], ranked[0]["target"]
     info["chosen"] = (Ps[s], Pt[t])
-    maps = [_zoomout_and_match(source, target, c["map"][0], k_end, step, 2000, True) for c in ranked]
+    maps = [_zoomout_and_match(source, target, c["map"][0], k_end=k_end, step=step, n_zoomout=ZOOMOUT_SAMPLES,
+                               all_target_vertices=True) for c in ranked]
     return (maps, info) if return_info else maps
 
 
@@ -395,4 +397,3 @@ def rank_candidates(candidates: list[dict], keep_fraction: float = CHIRALITY_POO
     return pool + rest
 
 
-_ranked = rank_candidates   # the name ``automatic_hypotheses`` calls it by
