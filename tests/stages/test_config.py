@@ -92,6 +92,18 @@ def test_bad_overrides(tmp_path, monkeypatch, override, needle):
         load_pipeline(str(path), [override])
 
 
+def test_overrides_reach_the_stage_parameters(tmp_path, monkeypatch):
+    """``STAGE.PARAM=v`` sets that stage's parameter (over its ${...} value), ``KEY=v`` a ``params`` key that
+    stages read through ${KEY}; an int given for a float parameter is stored as a float (same cache key)."""
+    monkeypatch.chdir(tmp_path)
+    path = make_project(tmp_path, n=3)
+    pipe = load_pipeline(str(path), ["summary.sigma=0.25", "feat.dim=8"])
+    assert pipe.stages["summary"].params["sigma"] == 0.25 and pipe.stages["feat"].params["dim"] == 8
+    pipe = load_pipeline(str(path), ["sigma=2"])
+    assert pipe.params["sigma"] == 2 and pipe.stages["summary"].params["sigma"] == 2.0
+    assert type(pipe.stages["summary"].params["sigma"]) is float
+
+
 def test_missing_pipeline_file_via_cli_exits_2(tmp_path):
     res = cli_main(["run", "nope.yaml"], cwd=tmp_path)
     assert res.returncode == 2 and "nope.yaml" in res.stderr and "not found" in res.stderr

@@ -8,7 +8,7 @@ import pytest
 
 from stages.inputs import DictInput, EntryInput, PairsInput, StackInput, ValueInput
 from stages.store import Store
-from stages.worker import TaskCall, TaskResult, TaskStatus, run_task
+from stages.worker import TaskCall, TaskResult, TaskStatus, load_inputs, run_task
 
 
 @pytest.fixture
@@ -42,6 +42,22 @@ def test_pairs_input_assembles_the_full_matrix_with_the_mirror(store):
     assert out["names"] == ["a", "b", "c"]
     np.testing.assert_array_equal(out["matrix"], full)   # the lower tile is the transposed upper one
     assert spec.deps() == ["t00", "t01", "t11"]
+
+
+def test_items_whose_upstream_task_failed_are_left_out_of_collections(store):
+    """A dict or stack input over items loads the items whose task succeeded; the failed item's entry does not
+    exist, and the function sees the others only (a stack keeping none is None)."""
+    store.put("k1", np.arange(3.0))
+    store.put("k3", np.arange(3.0) + 20)
+    ok1, ok3 = (TaskResult(k, "feat", n, TaskStatus.OK) for k, n in (("k1", "s1"), ("k3", "s3")))
+    failed = TaskResult("k2", "feat", "s2", TaskStatus.FAILED, error="ValueError: bad item")
+    inputs = {"d": DictInput({n: EntryInput(k) for n, k in (("s1", "k1"), ("s2", "k2"), ("s3", "k3"))}),
+              "s": StackInput((EntryInput("k1"), EntryInput("k2"), EntryInput("k3"))),
+              "none": StackInput((EntryInput("k2"),))}
+    out = load_inputs(store, inputs, (ok1, failed, ok3))
+    assert sorted(out["d"]) == ["s1", "s3"]
+    np.testing.assert_array_equal(out["s"], [[0.0, 1.0, 2.0], [20.0, 21.0, 22.0]])
+    assert out["none"] is None
 
 
 def call(store, function="synthetic.scale", inputs=None, params=None, key="out1"):

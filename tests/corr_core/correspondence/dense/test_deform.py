@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from corr_core.correspondence.dense import measures, refine_deform, refine_map
-from corr_core.correspondence.dense.deform import _fan_rotations, _incidence, arap_operators
+from corr_core.correspondence.dense import measures, mesh_basis, refine_deform, refine_map
+from corr_core.correspondence.dense.deform import _fan_rotations, _incidence, _Target, arap_operators
 from corr_core.geometry.primitives import rotation_about_y
 
 
@@ -74,3 +74,26 @@ def test_refine_deform_is_the_deform_step_and_checks_its_arguments(pair):
     for bad in ({"stiffness": 0.0}, {"iterations": 0}, {"anchor_weight": 1.5}):
         with pytest.raises(ValueError, match="refine_deform"):
             refine_deform(S, T, p2p, **bad)
+
+
+def test_data_term_pulls_onto_the_tangent_plane_of_a_compatible_target_vertex():
+    """The ARAP data goal on a flat target (z = 0, normals +z): a vertex whose image is an outlier is pulled onto
+    the target's tangent plane (point-to-plane, not to the vertex), one facing the other way is not pulled at
+    all, and an inlier gets ``anchor_weight`` of its image and the rest of the plane point."""
+    xs, ys = np.meshgrid(np.arange(6.0), np.arange(6.0))
+    V = np.c_[xs.ravel(), ys.ravel(), np.zeros(36)]
+    corner = (np.arange(5)[:, None] * 6 + np.arange(5)[None, :]).ravel()           # lower-left of each square
+    quads = np.c_[corner, corner + 1, corner + 7, corner + 6]
+    F = np.r_[quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]                  # counter-clockwise seen from +z
+    target = _Target(mesh_basis(V, F, k=4, n_samples=4))
+    assert np.allclose(target.normals, [0.0, 0.0, 1.0])
+    rng = np.random.default_rng(0)
+    X = np.c_[rng.uniform(1.0, 4.0, (9, 2)), rng.uniform(0.1, 0.4, 9)]      # above the interior of the grid
+    normals = np.tile([0.0, 0.0, 1.0], (9, 1))
+    normals[2] = [0.0, 0.0, -1.0]
+    anchors = X.copy()
+    anchors[:3] += [0.0, 0.0, 5.0]               # three outliers, six exact images: median distance 0
+    goal = target.data_goal(X, normals, anchors, anchor_weight=0.5, outlier=3.0, normal_cos=0.5)
+    np.testing.assert_allclose(goal[:2], X[:2] * [1.0, 1.0, 0.0], atol=1e-12)   # onto the plane, in place
+    np.testing.assert_allclose(goal[2], X[2])                                 # facing away: no pull
+    np.testing.assert_allclose(goal[3:], 0.5 * X[3:] + 0.5 * X[3:] * [1.0, 1.0, 0.0], atol=1e-12)
