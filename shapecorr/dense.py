@@ -116,9 +116,10 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *, ref
                  n_patches: int = 300,
                  patch_size: int = 64, rounds: int = 5, icp_iterations: int = 6, stiffness: float = 0.03) -> dict:
     """The dense map: the initial map upsampled to every template vertex (``upsample_spectral``), then refined
-    (``refine``: steps of ``refine.refine_map``; "extrinsic+spectral+deform" = patch-wise rigid ICP, full-resolution
-    ZoomOut, ARAP registration, as ``dense_map``; "extrinsic", "spectral", "none", ...). ``n_patches`` ...
-    ``icp_iterations``: ``refine_extrinsic``'s; ``stiffness``: ``refine_deform``'s. Several initial hypotheses
+    (``refine``: steps of ``refine.refine_map``; "extrinsic+spectral+deform+settle" = patch-wise rigid ICP,
+    full-resolution ZoomOut, ARAP registration, then ARAP against the surface alone, as ``dense_map``; "extrinsic",
+    "spectral", "none", ...). ``n_patches`` ... ``icp_iterations``: ``refine_extrinsic``'s; ``stiffness``:
+    ``refine_deform``'s and ``refine_settle``'s. Several initial hypotheses
     (``corr.dense_init`` with hypotheses > 1): each is refined and the least distorted result kept
     (``refine.refine_best``). Returns {"vertex_map": (n_template,) int target vertex id (original ids; -1 off the
     template's kept component), "hypothesis": index of the kept initial map (0: the best ranked), "distortions":
@@ -136,7 +137,7 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *, ref
         starts += list(zip(np.asarray(initial["C_more"]), np.asarray(initial["p2p_samples_more"])))
     maps = [dense.upsample_spectral(S, T, np.asarray(C), np.asarray(p2p)) for C, p2p in starts]
     extrinsic = {"n_patches": n_patches, "patch_size": patch_size, "rounds": rounds, "icp_iterations": icp_iterations}
-    options = {"extrinsic": extrinsic, "deform": {"stiffness": stiffness}}
+    options = {"extrinsic": extrinsic, "deform": {"stiffness": stiffness}, "settle": {"stiffness": stiffness}}
     best = dense.refine_best(S, T, maps, refine, options)
     hypothesis = best.index
     if "points" in initial:

@@ -34,7 +34,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from corr_core.correspondence.dense.basis import MeshBasis
-from corr_core.correspondence.dense.deform import refine_deform
+from corr_core.correspondence.dense.deform import refine_deform, refine_settle
 from corr_core.correspondence.dense.fmaps import fmap_from_p2p
 from corr_core.correspondence.dense.nearest import nearest_compatible
 from corr_core.geometry.primitives import unique_edges, vertex_normals
@@ -259,13 +259,13 @@ def _assign(tree: cKDTree, target: MeshBasis, p2p: np.ndarray, moved: np.ndarray
 
 
 
-DEFAULT_REFINE = "extrinsic+spectral+deform"
+DEFAULT_REFINE = "extrinsic+spectral+deform+settle"
 
 
 def refine_map(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, refine: str | None = DEFAULT_REFINE,
                options: dict | None = None) -> np.ndarray:
     """The pointwise refinements named by ``refine``, in its order: steps of ``REFINE_STEPS`` joined by "+"
-    (``DEFAULT_REFINE`` "extrinsic+spectral+deform" is the default of ``dense_map`` and of the
+    (``DEFAULT_REFINE`` "extrinsic+spectral+deform+settle" is the default of ``dense_map`` and of the
     ``corr.dense_refine`` stage), or None / "none" for no step.
 
     Args: source, target: bases; p2p: (n_s,) int current map (local ids); options: {step: kwargs of its function}.
@@ -435,4 +435,4 @@ def refine_best(source: MeshBasis, target: MeshBasis, maps: list, refine: str | 
 
 
 REFINE_STEPS = {"extrinsic": refine_extrinsic, "spectral": refine_spectral, "deform": refine_deform,
-                "geodesic": refine_geodesic}   # the steps ``refine_map`` runs, by name
+                "settle": refine_settle, "geodesic": refine_geodesic}   # the steps ``refine_map`` runs, by name
