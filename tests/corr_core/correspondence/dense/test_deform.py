@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from corr_core.correspondence.dense import measures, mesh_basis, refine_deform, refine_map
+from corr_core.correspondence.dense import measures, mesh_basis, refine_deform, refine_map, refine_settle
 from corr_core.correspondence.dense.deform import _fan_rotations, _incidence, _Target, arap_operators
 from corr_core.geometry.primitives import rotation_about_y
 
@@ -64,6 +64,22 @@ def test_refine_deform_keeps_the_true_map(pair):
     S, T = pair
     kept = refine_deform(S, T, np.arange(S.n))
     assert _error(T, kept) < 0.25 * _mean_edge(T) / T.scale
+
+
+def test_refine_settle_removes_what_the_anchors_of_refine_deform_leave(pair):
+    """From a noisy map, ``refine_deform`` keeps a little of the noise (its anchors are the noisy images);
+    ``refine_settle`` (no anchors: ARAP against the surface alone) takes it to a quarter or less, keeps the true
+    map, and is the default refinement's last step ("settle")."""
+    from corr_core.correspondence.dense import DEFAULT_REFINE
+
+    S, T = pair
+    rng = np.random.default_rng(0)
+    _, near = cKDTree(T.V).query(T.V, k=7)
+    deformed = refine_deform(S, T, near[np.arange(T.n), rng.integers(1, 7, T.n)])
+    settled = refine_settle(S, T, deformed)
+    assert _error(T, settled) < 0.25 * _error(T, deformed), (_error(T, deformed), _error(T, settled))
+    assert _error(T, refine_settle(S, T, np.arange(S.n))) < 0.25 * _mean_edge(T) / T.scale
+    assert np.array_equal(refine_map(S, T, deformed, "settle"), settled) and DEFAULT_REFINE.endswith("+settle")
 
 
 def test_refine_deform_is_the_deform_step_and_checks_its_arguments(pair):
