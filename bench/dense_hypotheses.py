@@ -11,7 +11,7 @@ disagreement, refined ``map_distortion``, mean geodesic error / sqrt(area) at 50
 accuracy (< 0.5: a flipped map). The summary: targets, flips of the map ``refine_best`` keeps among the
 hypotheses ``hypotheses_to_refine`` selects, its confidence, and the smallest margin of a right choice.
 
-Run:  python bench/dense_hypotheses.py [--seeds 0-9] [--poses 6] [--decimated] [--json OUT]
+Run:  python bench/dense_hypotheses.py [--seeds 0-9] [--poses 6] [--decimated] [--meshes mesh007] [--json OUT]
       (an existing --json file is resumed: its targets are not run again, and the summary covers all of them)
 """
 from __future__ import annotations
@@ -100,6 +100,7 @@ def main(argv=None) -> int:
     ap.add_argument("--poses", type=int, default=6)
     ap.add_argument("--candidates", type=int, default=4, help="starting maps refined per target (all scored)")
     ap.add_argument("--decimated", action="store_true", help="also a decimated, shuffled copy of pose 1")
+    ap.add_argument("--meshes", default=None, help="only these test meshes, e.g. mesh007 (comma-separated names)")
     ap.add_argument("--work", default=None, help="folder for the generated data (default: a temporary one)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
@@ -125,7 +126,7 @@ def main(argv=None) -> int:
         S = basis.mesh_basis(V_s, F_s, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
         S.sample_distances(SETTINGS["n_patches"])
         for name, V_t, F_t, truth in _targets(root, args.decimated):
-            if (seed, name) in done:
+            if (seed, name) in done or (args.meshes and name not in args.meshes.split(",")):
                 continue
             T = basis.mesh_basis(V_t, F_t, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
             rows = score_candidates(S, T, V_t, F_t, truth, landmarks, args.candidates)

@@ -9,6 +9,7 @@ samples (0 iterations: no settling), CPU seconds of the settling; the summary: m
 Settings as ``bench/dense_hypotheses.py`` (k 60, 1000 samples, 150 patches).
 
 Run:  python bench/settle_sweep.py [--seeds 10-11] [--poses 4] [--same-body] [--json OUT]
+      (an existing --json file is resumed: its targets are not run again, and the summary covers all of them)
 """
 from __future__ import annotations
 
@@ -78,6 +79,10 @@ def main(argv=None) -> int:
 
     work = args.work or tempfile.mkdtemp(prefix="settle_sweep_")
     results = []
+    if args.json and os.path.isfile(args.json):               # resume: targets already in the file are kept
+        with open(args.json) as fh:
+            results = [r for r in json.load(fh) if r["seed"] in _seed_range(args.seeds)]
+    done = {(r["seed"], r["mesh"]) for r in results}
     for seed in _seed_range(args.seeds):
         root = os.path.join(work, f"{'same' if args.same_body else 'bodies'}_seed{seed}")
         if not os.path.isdir(root):
@@ -87,6 +92,8 @@ def main(argv=None) -> int:
         S = basis.mesh_basis(V_s, F_s, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
         S.sample_distances(SETTINGS["n_patches"])
         for name, V_t, F_t, truth in _targets(root, True):
+            if (seed, name) in done:
+                continue
             T = basis.mesh_basis(V_t, F_t, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
             rows = settle_rows(S, T, V_t, F_t, truth, iterations, stiffness)
             results.append({"seed": seed, "mesh": name, "n_vertices": len(V_t), "settings": rows})

@@ -185,8 +185,10 @@ def refine_settle(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, stiffne
     surface only (point-to-plane onto normal-compatible nearest vertices, i.e. non-rigid ICP), started from the
     current map. After ``refine_deform`` (whose anchors keep a wrong region from dragging its neighbours) it lets
     the registration slide along the surface to where the template keeps its shape best, which the anchors held
-    back: the map then moves tangentially, by about an edge. Measured from the default refinement's maps on
-    generated bodies (``python bench/settle_sweep.py``): mean error 0.0159 -> 0.0134 with 6 iterations per round.
+    back: the map then moves tangentially, by about an edge. ``python bench/settle_sweep.py --seeds 10 --poses 4``
+    (generated other bodies, 4 poses and a decimated copy, from the maps the other steps give) printed mean error
+    0.01382 unsettled, 0.01160 with these defaults (6 iterations, stiffness 0.03; lower on 5 of 5 targets), 0.01035
+    with 10 iterations (about 1.35x the settling's time; not yet re-measured on the pipelines, docs/dense.md).
 
     Args: as ``refine_deform``. Returns: (n_s,) int refined map.
     """
