@@ -114,7 +114,22 @@ def test_write_table_csv_and_json(tmp_path):
 
 
 @pytest.fixture
-def project(tmp_path, monkeypatch):
+def short_tmp_path():
+    """A new folder directly in the system's temporary folder: sweep prints the figure's absolute path, which
+    must fit MAX_WIDTH like the table, as it does for a project folder like /home/USER/PROJECT; pytest's
+    tmp_path is 60+ characters deep (10 more under pytest-xdist: popen-gwN/)."""
+    import shutil
+    import tempfile
+    from pathlib import Path
+
+    folder = Path(tempfile.mkdtemp(prefix="sweep-"))
+    yield folder
+    shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture
+def project(short_tmp_path, monkeypatch):
+    tmp_path = short_tmp_path
     monkeypatch.chdir(tmp_path)
     with loaded_plugin(tmp_path, monkeypatch, PLUGIN, PLUGIN_SOURCE):
         yield make_project(tmp_path, n=4, yaml_text=SYNTHETIC_YAML + EXTRA)
@@ -133,7 +148,8 @@ def test_headline_columns_default_requested_and_unknown(project):
         headline_columns(plan, rows, ["nope.*"])
 
 
-def test_sweep_cli_prints_headline_table_and_writes_csv(project, tmp_path):
+def test_sweep_cli_prints_headline_table_and_writes_csv(project, short_tmp_path):
+    tmp_path = short_tmp_path   # the project's folder
     env = plugins_env(PLUGIN)
     env["PYTHONPATH"] += ":" + str(tmp_path)
     env["COLUMNS"] = "0"     # unset: the output is a pipe, so the default width
