@@ -34,7 +34,7 @@ import numpy as np  # noqa: E402
 SETTINGS = {"k": 60, "n_samples": 1000, "k_init": 30, "n_patches": 150, "eval_vertices": 500}
 
 
-def _seed_range(text: str) -> list[int]:
+def seed_range(text: str) -> list[int]:
     """"0-9" or "0,3,5" -> [ints]."""
     if "-" in text:
         a, b = text.split("-")
@@ -81,7 +81,7 @@ def choice(rows: list[dict]) -> dict:
             "right": kept["landmark_accuracy"] >= 0.5, "mean_error": kept["mean_error"]}
 
 
-def _targets(root: str, decimated: bool):
+def generated_targets(root: str, decimated: bool):
     """(name, V, F, truth (n_template,) int) of every test mesh of a generated dataset."""
     from corr_core.geometry.mesh_io import load_mesh
 
@@ -116,7 +116,7 @@ def main(argv=None) -> int:
         with open(args.json) as fh:
             results = json.load(fh)
     done = {(r["seed"], r["mesh"]) for r in results}
-    for seed in _seed_range(args.seeds):
+    for seed in seed_range(args.seeds):
         root = os.path.join(work, f"bodies_seed{seed}")
         if not os.path.isdir(root):
             write_humanoid_dataset(root, n_poses=args.poses, seed=seed, vary_bodies=True,
@@ -125,7 +125,7 @@ def main(argv=None) -> int:
         landmarks, _ = read_landmarks(os.path.join(root, "landmark_vids.txt"), n_vertices=len(V_s))
         S = basis.mesh_basis(V_s, F_s, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
         S.sample_distances(SETTINGS["n_patches"])
-        for name, V_t, F_t, truth in _targets(root, args.decimated):
+        for name, V_t, F_t, truth in generated_targets(root, args.decimated):
             if (seed, name) in done or (args.meshes and name not in args.meshes.split(",")):
                 continue
             T = basis.mesh_basis(V_t, F_t, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])

@@ -28,7 +28,7 @@ if __name__ == "__main__":
 
 import numpy as np  # noqa: E402
 
-from bench.dense_hypotheses import SETTINGS, _seed_range, _targets  # noqa: E402
+from bench.dense_hypotheses import SETTINGS, seed_range, generated_targets  # noqa: E402
 
 BEFORE_SETTLING = "extrinsic+spectral+deform"
 
@@ -81,9 +81,9 @@ def main(argv=None) -> int:
     results = []
     if args.json and os.path.isfile(args.json):               # resume: targets already in the file are kept
         with open(args.json) as fh:
-            results = [r for r in json.load(fh) if r["seed"] in _seed_range(args.seeds)]
+            results = [r for r in json.load(fh) if r["seed"] in seed_range(args.seeds)]
     done = {(r["seed"], r["mesh"]) for r in results}
-    for seed in _seed_range(args.seeds):
+    for seed in seed_range(args.seeds):
         root = os.path.join(work, f"{'same' if args.same_body else 'bodies'}_seed{seed}")
         if not os.path.isdir(root):
             write_humanoid_dataset(root, n_poses=args.poses, seed=seed, vary_bodies=not args.same_body,
@@ -91,7 +91,7 @@ def main(argv=None) -> int:
         V_s, F_s = load_mesh(os.path.join(root, "meshes", "template", "mesh000.obj"))
         S = basis.mesh_basis(V_s, F_s, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
         S.sample_distances(SETTINGS["n_patches"])
-        for name, V_t, F_t, truth in _targets(root, True):
+        for name, V_t, F_t, truth in generated_targets(root, True):
             if (seed, name) in done:
                 continue
             T = basis.mesh_basis(V_t, F_t, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])

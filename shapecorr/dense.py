@@ -116,9 +116,9 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *, ref
                  n_patches: int = 300,
                  patch_size: int = 64, rounds: int = 5, icp_iterations: int = 6, stiffness: float = 0.03) -> dict:
     """The dense map: the initial map upsampled to every template vertex (``upsample_spectral``), then refined
-    (``refine``: steps of ``refine.refine_map``; "extrinsic+spectral+deform+settle" = patch-wise rigid ICP,
-    full-resolution ZoomOut, ARAP registration, then ARAP against the surface alone, as ``dense_map``; "extrinsic",
-    "spectral", "none", ...). ``n_patches`` ... ``icp_iterations``: ``refine_extrinsic``'s; ``stiffness``:
+    (``refine``: steps of ``refine.refine_map``; "extrinsic+spectral+deform" = patch-wise rigid ICP,
+    full-resolution ZoomOut, ARAP registration, as ``dense_map``; "+settle" adds ARAP against the surface alone;
+    "extrinsic", "spectral", "none", ...). ``n_patches`` ... ``icp_iterations``: ``refine_extrinsic``'s; ``stiffness``:
     ``refine_deform``'s and ``refine_settle``'s. Several initial hypotheses
     (``corr.dense_init`` with hypotheses > 1): each is refined and the least distorted result kept
     (``refine.refine_best``). Returns {"vertex_map": (n_template,) int target vertex id (original ids; -1 off the

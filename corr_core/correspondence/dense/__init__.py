@@ -9,8 +9,8 @@ Steps (each callable on its own; see the modules):
      ``refine.refine_extrinsic`` (patch-wise rigid ICP: robust patch fits, normal-compatible nearest vertices
      anywhere on the target, so twisted or slid regions come back) then ``refine.refine_spectral``
      (full-resolution ZoomOut with local candidates) then ``deform.refine_deform`` (as-rigid-as-possible
-     registration of the template onto the target, read back as nearest vertices) then ``deform.refine_settle``
-     (the same registration without the pull toward the current images) by default;
+     registration of the template onto the target, read back as nearest vertices) by default;
+     ``deform.refine_settle`` (the same registration without the pull toward the current images) and
      ``refine.refine_geodesic`` on request. The steps share ``nearest.nearest_compatible`` (the nearest target
      vertex whose normal agrees) and are named in one table, ``refine.REFINE_STEPS``.
   4. ``transfer.transfer_landmarks``; ``measures`` evaluates maps where ground truth exists.
@@ -51,9 +51,9 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
             landmarks) or both None for the automatic map (no point needed on either mesh).
         k: final spectral basis size (ZoomOut end); k_init: size of the initial functional map.
         refine: pointwise steps after ZoomOut, applied in the order named (``refine.refine_map``):
-            "extrinsic+spectral+deform+settle" (default: ``refine_extrinsic``, ``refine_spectral``,
-            ``refine_deform``, then ``refine_settle``), "extrinsic", "spectral", "deform", "settle", "geodesic"
-            (``refine_geodesic``), any of them joined by "+", or None.
+            "extrinsic+spectral+deform" (default: ``refine_extrinsic``, ``refine_spectral``, then
+            ``refine_deform``), "extrinsic", "spectral", "deform", "settle" (``refine_settle``, on request),
+            "geodesic" (``refine_geodesic``), any of them joined by "+", or None.
         basis_template, basis_target: precomputed ``mesh_basis`` results (reuse them across pairs).
         refine_options: {step: kwargs} for the refinement functions (step: "extrinsic", "spectral", ...).
         hypotheses: automatic mode only: how many ranked initial maps are refined (``init.automatic_hypotheses``;

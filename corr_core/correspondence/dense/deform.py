@@ -183,9 +183,11 @@ def refine_settle(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, stiffne
                   iterations: int = 6, rounds: int = 10, normal_cos: float = 0.5) -> np.ndarray:
     """``refine_deform`` with no pull toward the current images (``anchor_weight`` 0): ARAP against the target
     surface only (point-to-plane onto normal-compatible nearest vertices, i.e. non-rigid ICP), started from the
-    current map. After ``refine_deform`` (whose anchors keep a wrong region from dragging its neighbours) it lets
-    the registration slide along the surface to where the template keeps its shape best, which the anchors held
-    back: the map then moves tangentially, by about an edge. ``python bench/settle_sweep.py --seeds 10 --poses 4``
+    current map: refinement step "settle", on request (not a default step). After ``refine_deform`` (whose anchors
+    keep a wrong region from dragging its neighbours) it lets the registration slide along the surface to where
+    the template keeps its shape best: on generated bodies of other people that lowers the error, on the course
+    SCAPE poses it raised it (docs/dense.md "Settling": with nothing holding it, a limb can turn about its own
+    axis at almost no ARAP cost). ``python bench/settle_sweep.py --seeds 10 --poses 4``
     (generated other bodies, 4 poses and a decimated copy, from the maps the other steps give) printed mean error
     0.01382 unsettled, 0.01160 with these defaults (6 iterations, stiffness 0.03; lower on 5 of 5 targets), 0.01035
     with 10 iterations (about 1.35x the settling's time; not yet re-measured on the pipelines, docs/dense.md).

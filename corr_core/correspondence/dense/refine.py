@@ -259,13 +259,13 @@ def _assign(tree: cKDTree, target: MeshBasis, p2p: np.ndarray, moved: np.ndarray
 
 
 
-DEFAULT_REFINE = "extrinsic+spectral+deform+settle"
+DEFAULT_REFINE = "extrinsic+spectral+deform"
 
 
 def refine_map(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, refine: str | None = DEFAULT_REFINE,
                options: dict | None = None) -> np.ndarray:
     """The pointwise refinements named by ``refine``, in its order: steps of ``REFINE_STEPS`` joined by "+"
-    (``DEFAULT_REFINE`` "extrinsic+spectral+deform+settle" is the default of ``dense_map`` and of the
+    (``DEFAULT_REFINE`` "extrinsic+spectral+deform" is the default of ``dense_map`` and of the
     ``corr.dense_refine`` stage), or None / "none" for no step.
 
     Args: source, target: bases; p2p: (n_s,) int current map (local ids); options: {step: kwargs of its function}.
