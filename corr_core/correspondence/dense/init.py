@@ -38,7 +38,10 @@ from corr_core.geometry.primitives import vertex_adjacency
 LOCAL_SCALES = (0.1, 0.2, 0.4)       # widths of exp(-(d/s)^2), units sqrt(area)
 CHIRALITY_WEIGHT = 0.3
 ZOOMOUT_SAMPLES = 2000           # template samples (and target samples or vertices) ZoomOut iterates on
-CHIRALITY_POOL = 2 / 3          # candidates kept: chirality agreement above this fraction of the best's
+# Candidates kept: chirality agreement above this fraction of the best's. `python bench/chirality_pool.py --seeds
+# 10-14 --poses 4` (generated other bodies): right maps 0.773-1.000 of the best's, turns 0.839-1.000, twists
+# 0.323-0.889, so 2/3 keeps every right map (margin 0.106) and drops only the clearest twists (docs/dense.md).
+CHIRALITY_POOL = 2 / 3
 # How many ranked initial maps the automatic mode refines (``hypotheses_to_refine``): always the best two (the
 # second is the reference of the map's confidence, ``refine.BestMap``), and any further candidate of the chirality
 # pool whose WKS disagreement is within HYPOTHESIS_WKS_RATIO of the best's, up to MAX_HYPOTHESES. On generated
@@ -387,9 +390,9 @@ def rank_candidates(candidates: list[dict], keep_fraction: float = CHIRALITY_POO
     decreasing chirality agreement.
 
     A mirror map's agreement is < 0; a map right on part of the body and mirrored elsewhere (only the hands or
-    only the feet swapped: a twist) keeps a fraction of it (measured 0.35-0.65 of the best on the course poses
-    and generated bodies); the true map and the orientation-preserving 180-degree turn keep all of it, and the
-    descriptors decide between those two."""
+    only the feet swapped: a twist) keeps a fraction of it (0.32-0.89 of the best on generated bodies, see
+    ``CHIRALITY_POOL``: the pool drops the clearest twists only); the true map and the orientation-preserving
+    180-degree turn keep most of it, and the descriptors (then the refined maps' distortion) decide."""
     best = max(c["chirality"] for c in candidates)
     in_pool = [best > 0 and c["chirality"] > keep_fraction * best for c in candidates]
     pool = sorted((c for c, ok in zip(candidates, in_pool) if ok), key=lambda c: c["wks"])
