@@ -70,6 +70,8 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
     """
     if (landmarks_template is None) != (landmarks_target is None):
         raise ValueError("give landmarks on both meshes (sparse mode) or on neither (automatic mode)")
+    if alternative is not None and landmarks_template is None:
+        raise ValueError("alternative: only with landmarks (the automatic mode compares its own hypotheses)")
     S = basis_template if basis_template is not None else mesh_basis(V_template, F_template, k=k, name="template")
     T = basis_target if basis_target is not None else mesh_basis(V_target, F_target, k=k, name="target")
     if landmarks_template is None:
@@ -84,8 +86,6 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
     maps = [upsample_spectral(S, T, C, p2p_samples) for C, p2p_samples in starts]
     best = refine_best(S, T, maps, refine, refine_options)
     if alternative is not None:
-        if landmarks_template is None:
-            raise ValueError("alternative: only with landmarks (the automatic mode compares its own hypotheses)")
         points = (S.to_local(ls, what="template landmark"), T.to_local(lt, what="target landmark"))
         best = best_with_points(S, T, [best.p2p, map_to_local(S, T, alternative)], *points)
     return map_to_original(S, T, best.p2p)

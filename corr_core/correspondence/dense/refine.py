@@ -292,18 +292,23 @@ def _log_ratio_spread(length_a: np.ndarray, length_b: np.ndarray) -> float:
     return float(np.mean(np.abs(log_ratio - np.median(log_ratio))))
 
 
-def _mean_edge(basis: MeshBasis) -> float:
-    """Mean edge length / sqrt(area) of a mesh: its resolution in the unit the distortion compares (cached)."""
-    def mean_edge() -> float:
+def _edges(basis: MeshBasis) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh's unique edges (e,2) int and their lengths (e,) float, cached on the basis (a template's serve every
+    target and hypothesis)."""
+    def edges_and_lengths() -> tuple[np.ndarray, np.ndarray]:
         edges, _ = unique_edges(basis.F)
-        return float(np.mean(np.linalg.norm(basis.V[edges[:, 0]] - basis.V[edges[:, 1]], axis=1))) / basis.scale
-    return basis.cached("mean_edge", mean_edge)
+        return edges, np.linalg.norm(basis.V[edges[:, 0]] - basis.V[edges[:, 1]], axis=1)
+    return basis.cached("edges", edges_and_lengths)
+
+
+def _mean_edge(basis: MeshBasis) -> float:
+    """Mean edge length / sqrt(area) of a mesh: its resolution in the unit the distortion compares."""
+    return float(np.mean(_edges(basis)[1])) / basis.scale
 
 
 def _forward_distortion(source: MeshBasis, target: MeshBasis, p2p: np.ndarray) -> float:
     """Spread of log edge-length ratios over the template edges, their ends taken to their target vertices."""
-    edges, _ = unique_edges(source.F)
-    length_s = np.linalg.norm(source.V[edges[:, 0]] - source.V[edges[:, 1]], axis=1)
+    edges, length_s = _edges(source)
     length_t = np.linalg.norm(target.V[p2p[edges[:, 0]]] - target.V[p2p[edges[:, 1]]], axis=1)
     return _log_ratio_spread(length_s, length_t)
 
@@ -316,9 +321,9 @@ def _backward_distortion(source: MeshBasis, target: MeshBasis, p2p: np.ndarray) 
     preimage = np.column_stack([np.bincount(p2p, weights=source.V[:, c], minlength=target.n) for c in range(3)])
     hit = count > 0
     preimage[hit] /= count[hit, None]
-    edges, _ = unique_edges(target.F)
-    edges = edges[hit[edges[:, 0]] & hit[edges[:, 1]]]
-    length_t = np.linalg.norm(target.V[edges[:, 0]] - target.V[edges[:, 1]], axis=1)
+    edges, length_t = _edges(target)
+    both = hit[edges[:, 0]] & hit[edges[:, 1]]
+    edges, length_t = edges[both], length_t[both]
     length_s = np.linalg.norm(preimage[edges[:, 0]] - preimage[edges[:, 1]], axis=1)
     return _log_ratio_spread(length_t, length_s)
 
