@@ -72,6 +72,12 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
         raise ValueError("give landmarks on both meshes (sparse mode) or on neither (automatic mode)")
     if alternative is not None and landmarks_template is None:
         raise ValueError("alternative: only with landmarks (the automatic mode compares its own hypotheses)")
+    if alternative is not None:
+        alternative = np.asarray(alternative, dtype=np.int64)
+        if alternative.shape != (len(V_template),) or ((alternative < -1) | (alternative >= len(V_target))).any():
+            raise ValueError(f"alternative must be a dense map of this pair: ({len(V_template)},) target vertex ids "
+                             f"in 0..{len(V_target) - 1} (-1 off the template's kept component), got shape "
+                             f"{alternative.shape}")
     S = basis_template if basis_template is not None else mesh_basis(V_template, F_template, k=k, name="template")
     T = basis_target if basis_target is not None else mesh_basis(V_target, F_target, k=k, name="target")
     if landmarks_template is None:

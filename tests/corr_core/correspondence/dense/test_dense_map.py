@@ -92,6 +92,8 @@ def test_an_alternative_map_replaces_the_points_map_only_when_it_keeps_the_point
                                alternative=mirror), from_points)
     with pytest.raises(ValueError, match="alternative: only with landmarks"):
         _run(body, body["Vp"], body["F"], body["T"], alternative=truth)
+    with pytest.raises(ValueError, match="alternative must be a dense map of this pair"):
+        _run(body, body["Vp"], body["F"], body["T"], sparse_target=body["sparse"], alternative=truth[:5])
 
 
 def test_automatic_map_to_a_rigidly_moved_pose_keeps_left_and_right(body):
