@@ -23,9 +23,11 @@ from corr_core.geometry.primitives import mesh_edges, surface_area, triangles_ke
 from corr_core.geometry.repair import repair_mesh, warn_repairs
 
 from stages.registry import register
+from stages.skipped import Skipped
 
 from .dense import dense_reports
 from .landmark_sources import mesh_landmarks, no_landmarks_result, sparse_positions
+from .skips import skip_reasons, skipped, without_skipped
 
 
 @register("corr.mesh", group="correspondence", fanout="item")
@@ -143,10 +145,11 @@ def _mark_truth(result: dict, template: dict, target: dict) -> dict:
     return {**result, "no_truth": f"{problem}; not scored"} if problem else result
 
 
-def _skipped_match(target: dict) -> dict | None:
-    """A matcher's result for a test mesh without landmarks (not matched, not scored), else None."""
+def _skipped_match(target: dict) -> Skipped | None:
+    """A matcher's result for a test mesh without landmarks (``skips.skipped``: not matched, not scored), else
+    None."""
     why = target.get("no_landmarks")
-    return {"no_truth": why, "no_landmarks": why, "dense_skipped": why} if why else None
+    return skipped(why) if why else None
 
 
 @register("corr.match_descriptor", group="correspondence", fanout="item")
@@ -156,8 +159,8 @@ def match_descriptor(template, target, landmarks, sparse_landmarks, *, descripto
 
     Returns {"all": (L,) predicted target landmark per template landmark, "sparse": (k,) within the sparse set}.
     """
-    if _skipped_match(target):
-        return _skipped_match(target)
+    if (skip := _skipped_match(target)) is not None:
+        return skip
     out = matchers.match_descriptors(template, target, sparse_positions(landmarks, sparse_landmarks),
                                      descriptor=descriptor, metric=metric)
     return _mark_truth(out, template, target)
@@ -171,8 +174,8 @@ def match_mrf(template, target, landmarks, sparse_landmarks, *, sigma: float = 0
 
     Returns {"all": (L,), "sparse": (k,)}.
     """
-    if _skipped_match(target):
-        return _skipped_match(target)
+    if (skip := _skipped_match(target)) is not None:
+        return skip
     out = matchers.match_geodesic_mrf(template, target, sparse_positions(landmarks, sparse_landmarks), sigma=sigma,
                                       orientation_test=orientation)
     return _mark_truth(out, template, target)
@@ -190,10 +193,11 @@ def match_mobius(template, target, template_mesh, target_mesh, landmarks, sparse
     Returns {"sparse": (k,), "all": (L,), "dense_errors": (dense_points,) geodesic error / sqrt(area),
     "best_score": float, "vertex_map": (n_template,) int target vertex of each template vertex}. The dense
     errors need the truth "vertex i <-> vertex i", i.e. the same vertex count and faces as the template;
-    otherwise they are left out and "dense_skipped" (str) says why.
+    otherwise they are left out and "dense_skipped" (str) says why. A test mesh without landmarks:
+    ``skips.skipped(why)``.
     """
-    if _skipped_match(target):
-        return _skipped_match(target)
+    if (skip := _skipped_match(target)) is not None:
+        return skip
     out = matchers.match_mobius(template, target, template_mesh, target_mesh,
                                 sparse_positions(landmarks, sparse_landmarks), K=K, metric=metric, K_scale=K_scale,
                                 power=power, top=top, dense_points=dense_points)
@@ -217,10 +221,12 @@ def _write_frequency_figure(label: str, report: dict, rows: list[str], out_dir: 
 def _dense_report(mobius_votes: dict, out_dir: str) -> dict:
     """Geodesic error curve of the Möbius dense maps (Kim et al. 2011 measure) and the meshes skipped."""
     out = {}
-    skipped = {m: r["dense_skipped"] for m, r in sorted(mobius_votes.items()) if "dense_skipped" in r}
-    if skipped:
-        out["dense_map_skipped"] = skipped
-    errors = np.concatenate([np.asarray(r["dense_errors"]) for r in mobius_votes.values() if "dense_errors" in r]
+    made = without_skipped(mobius_votes)
+    not_made = {**skip_reasons(mobius_votes),
+                **{m: r["dense_skipped"] for m, r in made.items() if "dense_skipped" in r}}
+    if not_made:
+        out["dense_map_skipped"] = dict(sorted(not_made.items()))
+    errors = np.concatenate([np.asarray(r["dense_errors"]) for r in made.values() if "dense_errors" in r]
                             or [np.zeros(0)])
     if errors.size:
         thresholds = measures.DENSE_ERROR_THRESHOLDS
@@ -237,8 +243,9 @@ def _drop_unscorable(inputs: dict) -> tuple[dict, dict[str, str]]:
     not_scored: dict[str, str] = {}
     for method, results in inputs.items():
         if results:
-            inputs[method], skipped = measures.scorable_results(results)
-            not_scored.update(skipped)
+            not_scored.update(skip_reasons(results))
+            inputs[method], no_truth = measures.scorable_results(without_skipped(results))
+            not_scored.update(no_truth)
     for mesh_name, reason in sorted(not_scored.items()):
         _warnings.warn(f"{mesh_name}: {reason}", UserWarning, stacklevel=3)
     return inputs, not_scored

@@ -26,7 +26,7 @@ import numpy as np
 from corr_core import plotting
 from corr_core.correspondence import dense, measures
 from corr_core.correspondence.dense import measures as dense_measures_lib
-from corr_core.correspondence.dense.basis import MeshBasis, map_to_local, map_to_original
+from corr_core.correspondence.dense.basis import MeshBasis, map_to_original
 from corr_core.correspondence.dense.refine import LOW_CONFIDENCE
 from corr_core.correspondence.landmarks import read_landmarks, write_landmarks
 from corr_core.geometry.intrinsic import IntrinsicMesh
@@ -36,7 +36,7 @@ from corr_core.geometry.sampling import farthest_point_samples
 from stages.registry import register
 
 from .landmark_sources import mesh_landmarks, numbered_like_template, sparse_positions
-from .skips import is_skipped, skip_reason, skip_reasons, skipped
+from .skips import is_skipped, skip_reason, skip_reasons, skipped, without_skipped
 
 METHODS = ("dense_sparse", "dense_auto")
 KIM_LABELS = {"mobius": "Möbius (best map)", "dense_sparse": "dense_sparse (5 points)",
@@ -112,12 +112,13 @@ def dense_init(template_basis, target_basis, template_mesh, target_mesh, landmar
 
 
 @register("corr.dense_refine", group="correspondence", fanout="item")
-def dense_refine(template_basis, target_basis, initial, alternative=None, *, refine: str = dense.DEFAULT_REFINE,
+def dense_refine(template_basis, target_basis, initial, alternative=None, *,
+                 refine: str | list[str] = dense.DEFAULT_REFINE,
                  n_patches: int = 300,
                  patch_size: int = 64, rounds: int = 5, icp_iterations: int = 6, stiffness: float = 0.03) -> dict:
     """The dense map: the initial map upsampled to every template vertex (``upsample_spectral``), then refined
-    (``refine``: steps of ``refine.refine_map``; "extrinsic+spectral+deform" = patch-wise rigid ICP,
-    full-resolution ZoomOut, ARAP registration, as ``dense_map``; "+settle" adds ARAP against the surface alone;
+    (``refine``: steps of ``refine.refine_plan``, joined by "+" or as a list; "extrinsic+spectral+deform" =
+    patch-wise rigid ICP, full-resolution ZoomOut, ARAP registration, as ``dense_map``; "+settle" adds ARAP against the surface alone;
     "extrinsic", "spectral", "none", ...). ``n_patches`` ... ``icp_iterations``: ``refine_extrinsic``'s; ``stiffness``:
     ``refine_deform``'s and ``refine_settle``'s. Several initial hypotheses
     (``corr.dense_init`` with hypotheses > 1): each is refined and the least distorted result kept
@@ -137,13 +138,14 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *, ref
         starts += list(zip(np.asarray(initial["C_more"]), np.asarray(initial["p2p_samples_more"])))
     maps = [dense.upsample_spectral(S, T, np.asarray(C), np.asarray(p2p)) for C, p2p in starts]
     extrinsic = {"n_patches": n_patches, "patch_size": patch_size, "rounds": rounds, "icp_iterations": icp_iterations}
-    options = {"extrinsic": extrinsic, "deform": {"stiffness": stiffness}, "settle": {"stiffness": stiffness}}
-    best = dense.refine_best(S, T, maps, refine, options)
+    plan = dense.refine_plan(refine, {"extrinsic": extrinsic, "deform": {"stiffness": stiffness},
+                                      "settle": {"stiffness": stiffness}})
+    best = dense.refine_best(S, T, maps, plan)
     hypothesis = best.index
     if "points" in initial:
         points = np.asarray(initial["points"])
-        if alternative and "vertex_map" in alternative:
-            best = dense.best_with_points(S, T, [best.p2p, map_to_local(S, T, alternative["vertex_map"])], *points)
+        if alternative is not None and not is_skipped(alternative) and "vertex_map" in alternative:
+            best = dense.with_alternative(S, T, best, alternative["vertex_map"], *points)
             hypothesis = "alternative" if best.index == 1 else hypothesis
         confidence = dense.points_agreement(T, best.p2p, *points)
     else:
@@ -155,7 +157,7 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *, ref
 
 def _given_maps(inputs: dict) -> dict:
     """{method: {mesh: (n_template,) int}} of the dense results that have a map."""
-    return {method: {m: np.asarray(r["vertex_map"], np.int64) for m, r in sorted((res or {}).items())
+    return {method: {m: np.asarray(r["vertex_map"], np.int64) for m, r in sorted(without_skipped(res).items())
                      if "vertex_map" in r} for method, res in inputs.items() if res}
 
 
@@ -263,7 +265,8 @@ def dense_measures(template_mesh, target_mesh, landmarks, landmark_files=None, g
     """
     name = item_name or os.path.splitext(target_mesh["name"])[0]
     maps = {k: np.asarray(r["vertex_map"], np.int64) for k, r in
-            (("mobius", mobius), ("dense_sparse", dense_sparse), ("dense_auto", dense_auto)) if r and "vertex_map" in r}
+            (("mobius", mobius), ("dense_sparse", dense_sparse), ("dense_auto", dense_auto))
+            if r is not None and not is_skipped(r) and "vertex_map" in r}
     truth, source = _true_map(template_mesh, target_mesh, ground_truth, name)
     out = {"truth": source} if truth is not None else {"no_truth": source}
     Vt, Ft = np.asarray(target_mesh["V"]), np.asarray(target_mesh["F"])

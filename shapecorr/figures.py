@@ -19,6 +19,7 @@ from corr_core.plotting import meshes as mesh_plots
 from stages.registry import register
 
 from .landmark_sources import mesh_landmarks
+from .skips import without_skipped
 
 VIEWS = (0, 1)         # front and three-quarter cameras of 8 around the y axis
 
@@ -31,7 +32,7 @@ def _landmark_methods(inputs: dict) -> dict:
     """{method: {test mesh: (L,) predictions}} of the given method inputs, test meshes with a truth only."""
     out = {}
     for method, results in inputs.items():
-        preds = {m: np.asarray(r["all"]) for m, r in sorted((results or {}).items())
+        preds = {m: np.asarray(r["all"]) for m, r in sorted(without_skipped(results).items())
                  if "no_truth" not in r and "all" in r}
         if preds:
             out[method] = preds
@@ -69,7 +70,7 @@ def _vertex_maps(results) -> dict:
     """{test mesh: (n_template,) int} from {test mesh: array or {"vertex_map": array}} (results without a map,
     e.g. a skipped mesh, are left out)."""
     return {m: np.asarray(r["vertex_map"] if isinstance(r, dict) else r, np.int64)
-            for m, r in sorted((results or {}).items()) if not isinstance(r, dict) or "vertex_map" in r}
+            for m, r in sorted(without_skipped(results).items()) if not isinstance(r, dict) or "vertex_map" in r}
 
 
 def _mean_errors(maps: dict, dense_measures) -> dict:

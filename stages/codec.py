@@ -1,4 +1,5 @@
-"""The value codec: a stored value (dicts, lists, numpy arrays, JSON scalars) as a JSON tree plus zarr arrays."""
+"""The value codec: a stored value (dicts, lists, numpy arrays, JSON scalars, ``Skipped``) as a JSON tree plus zarr
+arrays."""
 from __future__ import annotations
 
 from typing import Any
@@ -7,6 +8,7 @@ import numpy as np
 
 from .checksums import array_checksum
 from .errors import CorruptEntry
+from .skipped import Skipped
 
 CHUNK_BYTES = 32 * 2**20
 
@@ -32,6 +34,8 @@ def encode(value: Any, arrays: dict[str, np.ndarray]) -> Any:
         return {"__dict__": {k: encode(v, arrays) for k, v in value.items()}}
     if isinstance(value, (list, tuple)):
         return [encode(v, arrays) for v in value]
+    if isinstance(value, Skipped):
+        return {"__skipped__": value.why}
     if isinstance(value, np.generic):
         return value.item()
     if value is None or isinstance(value, (bool, int, float, str)):
@@ -44,6 +48,8 @@ def decode(tree: Any, arrays: dict[str, np.ndarray]) -> Any:
     if isinstance(tree, dict):
         if "__array__" in tree:
             return arrays[tree["__array__"]]
+        if "__skipped__" in tree:
+            return Skipped(tree["__skipped__"])
         return {k: decode(v, arrays) for k, v in tree["__dict__"].items()}
     if isinstance(tree, list):
         return [decode(v, arrays) for v in tree]

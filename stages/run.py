@@ -34,7 +34,8 @@ class RunFailed(Exception):
 
 
 def stage_summary(plan: Plan, outcome_results: dict[str, TaskResult], missing_keys: set[str]) -> dict:
-    """Per stage: tasks, executed, cached, failed, skipped and summed compute seconds of this run."""
+    """Per stage: tasks, executed, cached, failed, skipped (inputs failed), items_skipped (executed tasks whose
+    function returned ``Skipped``) and summed compute seconds of this run."""
     out = {}
     for name, sp in plan.stages.items():
         ex = [outcome_results[t.key] for t in sp.tasks if t.key in outcome_results]
@@ -47,6 +48,7 @@ def stage_summary(plan: Plan, outcome_results: dict[str, TaskResult], missing_ke
                           for t in sp.tasks),
             "failed": count(TaskStatus.FAILED),
             "skipped": count(TaskStatus.SKIPPED),
+            "items_skipped": sum(bool(r.item_skipped) for r in ex),
             "seconds": round(sum(r.seconds for r in ex), 4),
         }
         if sp.skipped is not None:  # the stage has no tasks: an input it needs is absent
@@ -132,6 +134,8 @@ def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None,
                "failures": [{"stage": r.stage, "item": r.label, "error": r.error, "traceback": r.traceback}
                             for r in results.values() if r.status is TaskStatus.FAILED],
                "skipped": [r.display for r in results.values() if r.status is TaskStatus.SKIPPED],
+               "items_skipped": [{"stage": r.stage, "item": r.label, "why": r.item_skipped}
+                                 for r in results.values() if r.item_skipped],
                "wall_seconds": round(time.time() - t0, 3), "published": len(published)}
     record = build_record(plan, summary, previous=record_before)
     if record_before and not any(s["executed"] for s in summary["stages"].values()):
@@ -154,6 +158,8 @@ def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None,
             log(f"warning ({stage}): {w}")
     for f in summary["failures"]:  # printed even with --quiet: which item failed, and why
         print(f"FAILED {f['stage']}[{f['item']}]: {f['error']}", file=sys.stderr, flush=True)
+    for item in summary["items_skipped"]:   # computed, stored, and not an error: the function said why
+        log(f"{item['stage']}[{item['item']}]: skipped: {item['why']}")
     if summary["skipped"]:
         log(f"skipped {len(summary['skipped'])} task(s) whose inputs failed")
     if summary["failures"]:

@@ -21,6 +21,7 @@ from .errors import CorruptEntry
 from .inputs import (DictInput, InputError, InputSpec, PairsInput, SparsePairsInput, StackInput, ValueInput,
                      partial_pairs, partial_tile)
 from .logs import configure_logging
+from .skipped import Skipped
 from .store import Store
 
 
@@ -66,6 +67,7 @@ class TaskResult:
     because: str = ""           # SKIPPED: the upstream task that did not succeed
     corrupt_key: str = ""       # CORRUPT: the input entry to recompute
     left_out: tuple[tuple[str, str, str, str], ...] = ()  # OK/CACHED: items computed without (left_out_items)
+    item_skipped: str = ""      # OK: the function returned ``Skipped(why)``: why
 
     def with_status(self, status: TaskStatus, **changes: Any) -> "TaskResult":
         return replace(self, status=status, **changes)
@@ -213,7 +215,8 @@ def run_task(call: TaskCall, *upstream: TaskResult) -> TaskResult:
     except TypeError as exc:
         return base.with_status(TaskStatus.FAILED, error=f"result of {call.function} cannot be stored: {exc}",
                                 seconds=seconds)
-    return base.with_status(TaskStatus.OK, seconds=seconds, left_out=left_out)
+    return base.with_status(TaskStatus.OK, seconds=seconds, left_out=left_out,
+                            item_skipped=value.why if isinstance(value, Skipped) else "")
 
 
 def _call(fn: registry.StageFunction, call: TaskCall, inputs: dict[str, Any], kwargs: dict,

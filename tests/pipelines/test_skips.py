@@ -20,3 +20,11 @@ def test_results_with_a_map_are_not_skipped():
     assert skip_reasons({"b": skipped("why b"), "a": result, "c": skipped("why c")}) == {"b": "why b",
                                                                                          "c": "why c"}
     assert skip_reasons(None) == {}
+
+
+def test_only_the_engines_skipped_value_is_skipped():
+    from shapecorr.skips import without_skipped
+
+    assert not is_skipped({"skipped": "a result that happens to have this key"})
+    assert without_skipped({"a": skipped("why"), "b": {"all": 1}}) == {"b": {"all": 1}}
+    assert without_skipped(None) == {}

@@ -13,6 +13,7 @@ import time
 import numpy as np
 
 from stages.registry import Plugin, register
+from stages.skipped import Skipped
 
 PLUGIN = Plugin(name="synthetic", packages=(__name__,))
 
@@ -139,3 +140,20 @@ def _spin(ms: float) -> None:
     x = np.ones(64)
     while time.perf_counter() < end:
         x = np.sqrt(x + 1.0)
+
+
+@register("synthetic.maybe_skip", fanout="item")
+def maybe_skip(path, *, skip_on: str = "") -> float | Skipped:
+    """The length of a text file, or ``Skipped`` (naming the file) when it contains ``skip_on``."""
+    with open(path, encoding="utf-8") as fh:
+        text = fh.read()
+    if skip_on and skip_on in text:
+        return Skipped(f"{os.path.basename(path)} contains '{skip_on}'")
+    return float(len(text))
+
+
+@register("synthetic.count_skipped", fanout="once")
+def count_skipped(items) -> dict:
+    """{"skipped": {name: why} of the items received as ``Skipped``, "kept": how many others}."""
+    skipped = {n: v.why for n, v in sorted(items.items()) if isinstance(v, Skipped)}
+    return {"skipped": skipped, "kept": len(items) - len(skipped)}

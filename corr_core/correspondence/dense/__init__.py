@@ -22,24 +22,26 @@ from __future__ import annotations
 
 import numpy as np
 
-from corr_core.correspondence.dense.basis import MeshBasis, map_to_local, map_to_original, mesh_basis
+from corr_core.correspondence.dense.basis import MeshBasis, map_to_original, mesh_basis
 from corr_core.correspondence.dense.deform import refine_deform, refine_settle
 from corr_core.correspondence.dense.init import automatic_hypotheses, map_automatic, map_from_points
-from corr_core.correspondence.dense.refine import (DEFAULT_REFINE, BestMap, best_with_points, map_distortion,
-                                                   points_agreement, refine_best, refine_extrinsic, refine_geodesic,
-                                                   refine_map, refine_spectral, upsample_spectral)
+from corr_core.correspondence.dense.refine import (DEFAULT_REFINE, BestMap, RefineStep, best_with_points,
+                                                   map_distortion, points_agreement, refine_best, refine_extrinsic,
+                                                   refine_geodesic, refine_map, refine_plan, refine_spectral,
+                                                   upsample_spectral, with_alternative)
 from corr_core.correspondence.dense.transfer import format_dense_map, read_dense_map, transfer_landmarks
 
 __all__ = ["MeshBasis", "mesh_basis", "map_to_original", "dense_map", "map_from_points", "map_automatic",
            "automatic_hypotheses", "upsample_spectral", "refine_extrinsic", "refine_geodesic", "refine_deform",
            "refine_settle",
-           "refine_map", "refine_spectral", "refine_best", "BestMap", "best_with_points", "map_distortion",
+           "refine_map", "refine_plan", "RefineStep", "refine_spectral", "refine_best", "BestMap",
+           "best_with_points", "with_alternative", "map_distortion",
            "points_agreement", "DEFAULT_REFINE", "transfer_landmarks", "format_dense_map", "read_dense_map"]
 
 
 def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarray, F_target: np.ndarray,
               landmarks_template=None, landmarks_target=None, *, k: int = 100, k_init: int = 40,
-              refine: str | None = DEFAULT_REFINE, basis_template: MeshBasis | None = None,
+              refine: str | list | None = DEFAULT_REFINE, basis_template: MeshBasis | None = None,
               basis_target: MeshBasis | None = None, refine_options: dict | None = None,
               hypotheses: int | None = None, alternative: np.ndarray | None = None) -> np.ndarray:
     """Dense map template -> target.
@@ -50,12 +52,14 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
         landmarks_template, landmarks_target: (L,) int corresponding vertex ids (L >= 3, e.g. the 5 sparse
             landmarks) or both None for the automatic map (no point needed on either mesh).
         k: final spectral basis size (ZoomOut end); k_init: size of the initial functional map.
-        refine: pointwise steps after ZoomOut, applied in the order named (``refine.refine_map``):
+        refine: pointwise steps after ZoomOut, applied in the order named (``refine.refine_plan``):
             "extrinsic+spectral+deform" (default: ``refine_extrinsic``, ``refine_spectral``, then
             ``refine_deform``), "extrinsic", "spectral", "deform", "settle" (``refine_settle``, on request),
-            "geodesic" (``refine_geodesic``), any of them joined by "+", or None.
+            "geodesic" (``refine_geodesic``), any of them joined by "+", a list of names or ``RefineStep``s
+            (``RefineStep("deform", {"stiffness": 0.02})``), or None.
         basis_template, basis_target: precomputed ``mesh_basis`` results (reuse them across pairs).
-        refine_options: {step: kwargs} for the refinement functions (step: "extrinsic", "spectral", ...).
+        refine_options: {step: kwargs} for the refinement functions (step: "extrinsic", "spectral", ...; a
+            misspelt step or option is an error before any work).
         hypotheses: automatic mode only: how many ranked initial maps are refined (``init.automatic_hypotheses``;
             None: decided there, ``init.hypotheses_to_refine``: the best two, more when they are close); the
             least distorted refined map is kept (``refine.refine_best``), which resolves the 180-degree turn of
@@ -70,6 +74,7 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
     """
     if (landmarks_template is None) != (landmarks_target is None):
         raise ValueError("give landmarks on both meshes (sparse mode) or on neither (automatic mode)")
+    refine = refine_plan(refine, refine_options)                # a misspelt step or option fails here
     if alternative is not None and landmarks_template is None:
         raise ValueError("alternative: only with landmarks (the automatic mode compares its own hypotheses)")
     if alternative is not None:
@@ -90,8 +95,8 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
                              f"{lt.shape}")
         starts = [map_from_points(S, T, ls, lt, k_init=k_init, k_end=k)]
     maps = [upsample_spectral(S, T, C, p2p_samples) for C, p2p_samples in starts]
-    best = refine_best(S, T, maps, refine, refine_options)
+    best = refine_best(S, T, maps, refine)
     if alternative is not None:
-        points = (S.to_local(ls, what="template landmark"), T.to_local(lt, what="target landmark"))
-        best = best_with_points(S, T, [best.p2p, map_to_local(S, T, alternative)], *points)
+        best = with_alternative(S, T, best, alternative, S.to_local(ls, what="template landmark"),
+                                T.to_local(lt, what="target landmark"))
     return map_to_original(S, T, best.p2p)

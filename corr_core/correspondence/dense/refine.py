@@ -28,12 +28,14 @@ refined map is least distorted (``map_distortion``).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import inspect
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from corr_core.correspondence.dense.basis import MeshBasis
+from corr_core.correspondence.dense.basis import MeshBasis, map_to_local
 from corr_core.correspondence.dense.deform import refine_deform, refine_settle
 from corr_core.correspondence.dense.fmaps import fmap_from_p2p
 from corr_core.correspondence.dense.nearest import nearest_compatible
@@ -260,25 +262,75 @@ def _assign(tree: cKDTree, target: MeshBasis, p2p: np.ndarray, moved: np.ndarray
 
 
 DEFAULT_REFINE = "extrinsic+spectral+deform"
+_MAP_ARGUMENTS = ("source", "target", "p2p")          # what refine_map passes to every step itself
 
 
-def refine_map(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, refine: str | None = DEFAULT_REFINE,
-               options: dict | None = None) -> np.ndarray:
-    """The pointwise refinements named by ``refine``, in its order: steps of ``REFINE_STEPS`` joined by "+"
-    (``DEFAULT_REFINE`` "extrinsic+spectral+deform" is the default of ``dense_map`` and of the
-    ``corr.dense_refine`` stage), or None / "none" for no step.
+@dataclass(frozen=True)
+class RefineStep:
+    """One pointwise refinement step: ``name`` a key of ``REFINE_STEPS``, ``options`` keyword arguments of its
+    function (checked against the function's parameters when the step is made, so a misspelt option fails before
+    any work). ``RefineStep("deform", {"stiffness": 0.02})``."""
+    name: str
+    options: Mapping[str, Any] = field(default_factory=dict)
 
-    Args: source, target: bases; p2p: (n_s,) int current map (local ids); options: {step: kwargs of its function}.
+    def __post_init__(self):
+        if self.name not in REFINE_STEPS:
+            raise ValueError(f"unknown refinement step {self.name!r}; the steps are {list(REFINE_STEPS)}")
+        takes = [p for p in inspect.signature(REFINE_STEPS[self.name]).parameters if p not in _MAP_ARGUMENTS]
+        unknown = sorted(set(self.options) - set(takes))
+        if unknown:
+            raise ValueError(f"refinement step {self.name!r}: unknown option(s) {unknown}; it takes {takes}")
+        object.__setattr__(self, "options", dict(self.options))
+
+    def run(self, source: MeshBasis, target: MeshBasis, p2p: np.ndarray) -> np.ndarray:
+        """This step applied to ``p2p`` (n_s,) int local ids: the refined (n_s,) int map."""
+        return REFINE_STEPS[self.name](source, target, p2p, **self.options)
+
+
+def refine_plan(refine: str | Sequence | None = DEFAULT_REFINE,
+                options: Mapping[str, Mapping] | None = None) -> tuple[RefineStep, ...]:
+    """The typed steps of a refinement written as users write it.
+
+    Args:
+        refine: None or "none" (no step); names of ``REFINE_STEPS`` joined by "+" in the order they run (the form
+            of the pipelines' YAML, e.g. ``DEFAULT_REFINE``); or a sequence of names and ``RefineStep``s.
+        options: {step name: keyword arguments} given to every step of that name (a ``RefineStep``'s own options
+            win). Options of a step the plan does not run are allowed (a stage passes every step's options); an
+            option key that names no step is an error.
+    Returns: the steps, in order.
+    """
+    options = dict(options or {})
+    unknown = sorted(set(options) - set(REFINE_STEPS))
+    if unknown:
+        raise ValueError(f"refine options name no refinement step: {unknown}; the steps are {list(REFINE_STEPS)}")
+    if refine is None or refine == "none":
+        return ()
+    if isinstance(refine, str):
+        refine = refine.split("+")
+    elif not isinstance(refine, Sequence):
+        raise ValueError(f"refine must be None, 'none', steps of {list(REFINE_STEPS)} joined by '+' (e.g. "
+                         f"{DEFAULT_REFINE!r}) or a list of steps, got {refine!r}")
+    steps = []
+    for step in refine:
+        if isinstance(step, RefineStep):
+            steps.append(RefineStep(step.name, {**options.get(step.name, {}), **step.options}))
+        elif isinstance(step, str):
+            steps.append(RefineStep(step, options.get(step, {})))
+        else:
+            raise ValueError(f"a refinement step is a name of {list(REFINE_STEPS)} or a RefineStep, got {step!r}")
+    return tuple(steps)
+
+
+def refine_map(source: MeshBasis, target: MeshBasis, p2p: np.ndarray,
+               refine: str | Sequence | None = DEFAULT_REFINE, options: Mapping | None = None) -> np.ndarray:
+    """The pointwise refinements of ``refine_plan(refine, options)``, in order (``DEFAULT_REFINE``
+    "extrinsic+spectral+deform" is the default of ``dense_map`` and of the ``corr.dense_refine`` stage).
+
+    Args: source, target: bases; p2p: (n_s,) int current map (local ids); refine, options: as ``refine_plan``.
     Returns: (n_s,) int refined map.
     """
-    names = [] if refine in (None, "none") else str(refine).split("+")
-    unknown = [n for n in names if n not in REFINE_STEPS]
-    if unknown or (refine is not None and not isinstance(refine, str)):
-        raise ValueError(f"refine must be None, 'none' or steps of {list(REFINE_STEPS)} joined by '+' (e.g. "
-                         f"{DEFAULT_REFINE!r}), got {refine!r}")
-    options = options or {}
-    for name in names:
-        p2p = REFINE_STEPS[name](source, target, p2p, **options.get(name, {}))
+    for step in refine_plan(refine, options):
+        p2p = step.run(source, target, p2p)
     return p2p
 
 
@@ -370,21 +422,42 @@ MIN_POINTS_KEPT = 0.8     # another map replaces the one made from given points 
 
 
 def best_with_points(source: MeshBasis, target: MeshBasis, maps: list, points_source: np.ndarray,
-                     points_target: np.ndarray, min_kept: float = MIN_POINTS_KEPT) -> BestMap:
+                     points_target: np.ndarray, min_kept: float = MIN_POINTS_KEPT, *,
+                     known_distortions: Sequence[float | None] = ()) -> BestMap:
     """The least distorted of several refined maps (``map_distortion``) among those that keep the given points:
     ``maps[0]`` (the map made from them) always qualifies, any other one (e.g. the automatic map of the same pair)
     when ``points_agreement`` >= ``min_kept``. So given points never make a map worse than the automatic one when
     that one agrees with them (points placed a little off on a scan pull the map made from them).
 
-    Args: maps: [(n_s,) int local ids], refined; points_source, points_target: (L,) int local ids.
+    Args: maps: [(n_s,) int local ids], refined; points_source, points_target: (L,) int local ids;
+        known_distortions: ``map_distortion`` of the first maps when already computed (None: not known).
     Returns: ``BestMap`` over the qualifying maps (distortions of the others: inf).
     """
     if not len(maps):
         raise ValueError("best_with_points: no map given")
-    scores = tuple(map_distortion(source, target, m) if i == 0 or points_agreement(
-        target, m, points_source, points_target) >= min_kept else float("inf") for i, m in enumerate(maps))
+    known = list(known_distortions) + [None] * (len(maps) - len(known_distortions))
+
+    def score(i: int, m: np.ndarray) -> float:
+        if i and points_agreement(target, m, points_source, points_target) < min_kept:
+            return float("inf")
+        return known[i] if known[i] is not None else map_distortion(source, target, m)
+
+    scores = tuple(score(i, m) for i, m in enumerate(maps))
     best = int(np.argmin(scores))
     return BestMap(np.asarray(maps[best]), best, scores)
+
+
+def with_alternative(source: MeshBasis, target: MeshBasis, best: BestMap, alternative: np.ndarray,
+                     points_source: np.ndarray, points_target: np.ndarray) -> BestMap:
+    """``best`` (the refined map made from given points) or ``alternative``, whichever ``best_with_points`` keeps.
+
+    Args: best: ``refine_best``'s result for the map made from the points; alternative: (n_s original,) int another
+        dense map of the same pair in original ids (-1 off the kept component), e.g. the automatic one;
+        points_source, points_target: (L,) int local ids of the given points.
+    Returns: ``BestMap`` of the two (index 1: the alternative was kept).
+    """
+    return best_with_points(source, target, [best.p2p, map_to_local(source, target, alternative)], points_source,
+                            points_target, known_distortions=(best.distortions[best.index],))
 
 
 # The distortion margin at which a kept map counts as sure (confidence 1): the runner-up hypothesis refined to a
@@ -423,8 +496,8 @@ class BestMap:
         return float(min(1.0, self.margin / CONFIDENT_MARGIN))
 
 
-def refine_best(source: MeshBasis, target: MeshBasis, maps: list, refine: str | None = DEFAULT_REFINE,
-                options: dict | None = None) -> BestMap:
+def refine_best(source: MeshBasis, target: MeshBasis, maps: list,
+                refine: str | Sequence | None = DEFAULT_REFINE, options: Mapping | None = None) -> BestMap:
     """Refine each of several hypothesis maps (``refine_map``) and keep the least distorted result.
 
     Args: maps: [(n_s,) int local ids], e.g. the upsampled maps of ``init.automatic_hypotheses``.
@@ -433,7 +506,8 @@ def refine_best(source: MeshBasis, target: MeshBasis, maps: list, refine: str | 
     """
     if not len(maps):
         raise ValueError("refine_best: no hypothesis map given")
-    refined = [refine_map(source, target, m, refine, options) for m in maps]
+    plan = refine_plan(refine, options)
+    refined = [refine_map(source, target, m, plan) for m in maps]
     scores = tuple(map_distortion(source, target, m) for m in refined)
     best = int(np.argmin(scores))
     return BestMap(refined[best], best, scores)

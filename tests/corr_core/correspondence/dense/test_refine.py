@@ -67,8 +67,48 @@ def test_refine_map_runs_the_named_steps_in_order_and_rejects_unknown_ones(pair)
     both = refine_map(S, T, p2p, "extrinsic+spectral", {"extrinsic": FAST})
     assert np.array_equal(both, refine_spectral(S, T, refine_extrinsic(S, T, p2p, **FAST)))
     assert np.array_equal(refine_map(S, T, p2p, None), p2p) and np.array_equal(refine_map(S, T, p2p, "none"), p2p)
-    with pytest.raises(ValueError, match="refine must be"):
+    with pytest.raises(ValueError, match="unknown refinement step 'smooth'"):
         refine_map(S, T, p2p, "extrinsic+smooth")
+
+
+def test_refine_plan_reads_every_form_into_the_same_typed_steps():
+    from corr_core.correspondence.dense import RefineStep, refine_plan
+
+    options = {"extrinsic": {"n_patches": 50}, "deform": {"stiffness": 0.02}}
+    plan = refine_plan("extrinsic+spectral", options)
+    assert plan == (RefineStep("extrinsic", {"n_patches": 50}), RefineStep("spectral"))   # deform's options unused
+    assert refine_plan(["extrinsic", "spectral"], options) == plan
+    assert refine_plan([RefineStep("extrinsic"), "spectral"], options) == plan               # options fill a step in
+    own = refine_plan([RefineStep("deform", {"stiffness": 0.05})], options)
+    assert own == (RefineStep("deform", {"stiffness": 0.05}),)                               # a step's own win
+    assert refine_plan(None) == () and refine_plan("none", options) == ()
+
+
+@pytest.mark.parametrize("refine, options, message", [
+    ("extrinsic+smoth", None, "unknown refinement step 'smoth'"),
+    ("extrinsic", {"extrinsic": {"n_patchez": 50}}, r"step 'extrinsic': unknown option\(s\) \['n_patchez'\]"),
+    ("extrinsic", {"extrinsc": {"n_patches": 50}}, r"name no refinement step: \['extrinsc'\]"),
+    ([3], None, "a refinement step is a name"),
+    (7, None, "refine must be None"),
+])
+def test_refine_plan_names_a_misspelt_step_or_option(refine, options, message):
+    from corr_core.correspondence.dense import refine_plan
+
+    with pytest.raises(ValueError, match=message):
+        refine_plan(refine, options)
+
+
+def test_dense_map_rejects_a_misspelt_refinement_before_any_work(monkeypatch):
+    import corr_core.correspondence.dense as dense
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("a basis was computed before the refinement was checked")
+
+    monkeypatch.setattr(dense, "mesh_basis", no_work)
+    V = np.eye(3)
+    with pytest.raises(ValueError, match="unknown option"):
+        dense.dense_map(V, np.array([[0, 1, 2]]), V, np.array([[0, 1, 2]]), refine="deform",
+                        refine_options={"deform": {"stifness": 0.1}})
 
 
 def _turned_map(S, T):
@@ -189,6 +229,21 @@ def test_best_with_points_takes_a_less_distorted_map_only_if_it_keeps_the_given_
     assert best_with_points(S, T, [truth, turned], points, points).index == 0
     lying = best_with_points(S, T, [turned, truth], points, _turned_map(S, T)[points])   # points given turned
     assert lying.index == 0 and np.isinf(lying.distortions[1])             # the other map does not keep them
+
+
+def test_with_alternative_keeps_the_alternative_only_when_best_with_points_would(pair, monkeypatch):
+    from corr_core.correspondence.dense import refine
+    from corr_core.correspondence.dense.basis import map_to_original
+
+    S, T = pair
+    truth, turned = np.arange(S.n), _turned_map(S, T)
+    points = S.samples[:6]
+    from_points = refine.BestMap(turned, 0, (refine.map_distortion(S, T, turned),))
+    scored = []
+    monkeypatch.setattr(refine, "map_distortion", lambda s, t, m: scored.append(m) or 0.0)
+    kept = refine.with_alternative(S, T, from_points, map_to_original(S, T, truth), points, points)
+    assert kept.index == 1 and np.array_equal(kept.p2p, truth)
+    assert len(scored) == 1 and kept.distortions[0] == from_points.distortions[0]   # map 0's distortion reused
 
 
 def test_map_to_local_inverts_map_to_original(pair):
