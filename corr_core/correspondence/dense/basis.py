@@ -207,7 +207,7 @@ def _shift_invert_eigsh(L, M, k: int, *, sigma: float) -> tuple[np.ndarray, np.n
     return sla.eigsh(L, k=k, M=M, sigma=sigma, which="LM", v0=start_vector(L.shape[0]), OPinv=op)
 
 
-def mesh_basis(V: np.ndarray, F: np.ndarray, k: int = 100, n_samples: int = 2000, name: str = "mesh") -> MeshBasis:
+def mesh_basis(V: np.ndarray, F: np.ndarray, *, k: int = 100, n_samples: int = 2000, name: str = "mesh") -> MeshBasis:
     """Eigenpairs, vertex areas and farthest-point samples of one mesh.
 
     Args:

@@ -57,7 +57,7 @@ def _incidence(edges: np.ndarray, n: int) -> tuple[sp.csr_matrix, sp.csr_matrix]
 
 
 def _fan_rotations(E0: np.ndarray, E1: np.ndarray, weights: np.ndarray, unsigned: sp.csr_matrix,
-                   squarings: int = 8) -> np.ndarray:
+                   *, squarings: int = 8) -> np.ndarray:
     """Best rotation of every vertex's edge fan: R_i = argmin sum_j w_ij |e1_ij - R e0_ij|^2 over rotations.
 
     Horn's quaternion form (1987): the optimal rotation is the top eigenvector of a symmetric 4x4 matrix built
@@ -141,14 +141,14 @@ class _Target:
         w_self = 1.0 - w_anchor - w_plane
         return w_anchor[:, None] * anchors + w_plane[:, None] * on_plane + w_self[:, None] * X
 
-    def nearest_vertices(self, X: np.ndarray, normals_X: np.ndarray, fallback: np.ndarray, k: int = 8) -> np.ndarray:
+    def nearest_vertices(self, X: np.ndarray, normals_X: np.ndarray, fallback: np.ndarray, *, k: int = 8) -> np.ndarray:
         """Nearest target vertex to each deformed vertex X (n,3) (normals (n,3)) among its ``k`` nearest whose
         normal faces the same side (cosine > 0); ``fallback`` (n,) int where none does."""
         ids, d = nearest_compatible(self.tree, self.normals, X, normals_X, min_cos=0.0, k=k)
         return np.where(np.isfinite(d), ids, fallback)
 
 
-def refine_deform(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, stiffness: float = 0.03,
+def refine_deform(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, stiffness: float = 0.03,
                   iterations: int = 3, rounds: int = 10, anchor_weight: float = 0.5, outlier: float = 3.0,
                   normal_cos: float = 0.5) -> np.ndarray:
     """ARAP registration of the template onto the target from the current map (module docstring).
@@ -179,7 +179,7 @@ def refine_deform(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, stiffne
     return p2p
 
 
-def refine_settle(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, stiffness: float = 0.03,
+def refine_settle(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, stiffness: float = 0.03,
                   iterations: int = 6, rounds: int = 10, normal_cos: float = 0.5) -> np.ndarray:
     """``refine_deform`` with no pull toward the current images (``anchor_weight`` 0): ARAP against the target
     surface only (point-to-plane onto normal-compatible nearest vertices, i.e. non-rigid ICP), started from the

@@ -50,7 +50,7 @@ def orientation_operators(basis: MeshBasis, funcs: np.ndarray, k: int, normalize
 
 
 def fit_functional_map(A_S: np.ndarray, A_T: np.ndarray, evals_S: np.ndarray, evals_T: np.ndarray,
-                       Om_S: np.ndarray | None = None, Om_T: np.ndarray | None = None, w_descr: float = 1.0,
+                       Om_S: np.ndarray | None = None, Om_T: np.ndarray | None = None, *, w_descr: float = 1.0,
                        w_lap: float = 0.1, w_orient: float = 1.0) -> np.ndarray:
     """Solve the quadratic functional-map energy of the module docstring exactly.
 
@@ -127,7 +127,7 @@ def fmap_from_p2p(p2p: np.ndarray, Phi_S_rows: np.ndarray, Phi_T: np.ndarray) ->
     return np.linalg.lstsq(Phi_S_rows, rhs, rcond=None)[0]
 
 
-def nearest_rows(queries: np.ndarray, points: np.ndarray, chunk: int = 256) -> np.ndarray:
+def nearest_rows(queries: np.ndarray, points: np.ndarray, *, chunk: int = 256) -> np.ndarray:
     """Index of the nearest row of ``points`` (p, d) for each row of ``queries`` (q, d) -> (q,) int.
 
     Brute force in float32 (``|x|^2 - 2 x.y`` by BLAS in blocks of ``chunk`` queries that stay in cache; ties

@@ -335,7 +335,7 @@ def hypotheses_to_refine(ranked: list[dict], keep_fraction: float = CHIRALITY_PO
 
 def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int | None = None,
                          points_source: np.ndarray | None = None,
-                         points_target: np.ndarray | None = None, keep: int = 4, k_init: int = 40,
+                         points_target: np.ndarray | None = None, *, keep: int = 4, k_init: int = 40,
                          k_probe: int = 60, k_end: int = 100, step: int = 2, n_probe: int = 1000,
                          orientation_neighbours: int = 64, return_info: bool = False):
     """The best ranked automatic maps (``rank_candidates``: ``map_automatic``'s choice first, then the next in the

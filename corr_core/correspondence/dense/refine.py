@@ -55,7 +55,7 @@ def _local_spectral_match(emb_s: np.ndarray, emb_t: np.ndarray, cands: np.ndarra
     return out
 
 
-def refine_spectral(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, k: int | None = None,
+def refine_spectral(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, k: int | None = None,
                     iterations: int = 5, n_candidates: int = 32) -> np.ndarray:
     """ZoomOut at full resolution and fixed ``k``, with local candidates (cost independent of n_s * n_t).
 
@@ -82,7 +82,7 @@ def refine_spectral(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, k: in
 
 
 def upsample_spectral(source: MeshBasis, target: MeshBasis, C: np.ndarray, p2p_samples: np.ndarray,
-                      n_candidates: int = 32) -> np.ndarray:
+                      *, n_candidates: int = 32) -> np.ndarray:
     """Point map of every template vertex from a map known at the template samples and a functional map.
 
     Each template vertex starts at the image of its nearest template sample (3D) and then takes, among the
@@ -104,7 +104,7 @@ def upsample_spectral(source: MeshBasis, target: MeshBasis, C: np.ndarray, p2p_s
     return _local_spectral_match(source.evecs[:, :ks], target.evecs[:, :kt] @ C.T, cands)
 
 
-def refine_geodesic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, n_anchors: int = 100,
+def refine_geodesic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, n_anchors: int = 100,
                     n_near: int = 12, n_candidates: int = 32, iterations: int = 3, min_anchor_distance: float = 0.02,
                     source_anchor_distances: np.ndarray | None = None) -> np.ndarray:
     """Geodesic trilateration refinement of a dense map (module docstring).
@@ -165,7 +165,7 @@ def _kabsch_batch(X: np.ndarray, Y: np.ndarray, w: np.ndarray) -> tuple[np.ndarr
     return R, my - np.einsum("bij,bj->bi", R, mx)
 
 
-def _robust_kabsch_batch(X: np.ndarray, Y: np.ndarray, iterations: int = 4, cutoff: float = 2.5
+def _robust_kabsch_batch(X: np.ndarray, Y: np.ndarray, *, iterations: int = 4, cutoff: float = 2.5
                          ) -> tuple[np.ndarray, np.ndarray]:
     """Rigid fits X (b,p,3) -> Y (b,p,3) that ignore wrong pairs: refit ``iterations`` times on the pairs whose
     residual is within ``cutoff`` x the patch's median residual. Returns R (b,3,3), t (b,3). A patch whose current
@@ -178,7 +178,7 @@ def _robust_kabsch_batch(X: np.ndarray, Y: np.ndarray, iterations: int = 4, cuto
     return R, t
 
 
-def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, n_patches: int = 300,
+def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, n_patches: int = 300,
                      patch_size: int = 64, icp_iterations: int = 6, rounds: int = 5, trim: float = 2.0,
                      n_candidates: int | None = None, normal_cos: float = -1.0) -> np.ndarray:
     """Local rigid alignment (patch-wise ICP) of the template onto the target, then nearest vertices.

@@ -15,7 +15,7 @@ from corr_core.correspondence.dense.basis import MeshBasis
 from corr_core.correspondence.dense.fmaps import fmap_from_p2p, p2p_from_fmap
 
 
-def zoomout(source: MeshBasis, target: MeshBasis, C: np.ndarray, k_end: int = 100, step: int = 5,
+def zoomout(source: MeshBasis, target: MeshBasis, C: np.ndarray, *, k_end: int = 100, step: int = 5,
             n_source: int | None = None, n_target: int | None = None, all_target_vertices: bool = False,
             adjoint: bool = True, full_band: float = 0.1) -> np.ndarray:
     """Refine a functional map by ZoomOut on the meshes' samples.
