@@ -180,7 +180,7 @@ def flip_lines(rows: list, methods: list, below: float = 0.5) -> list[str]:
 
 
 def time_ratios(summary: dict) -> dict:
-    """{(project method, pyFM mode): project CPU seconds / pyFM CPU seconds per pair} (issue 10: <= 1/3)."""
+    """{(project method, pyFM mode): project CPU seconds / pyFM CPU seconds per pair} (the target: <= 1/3)."""
     ours = [m for m in summary if not m.startswith("pyfm")]
     peers = [m for m in summary if m.startswith("pyfm")]
     return {(m, p): summary[m]["seconds"] / summary[p]["seconds"] for m in ours for p in peers

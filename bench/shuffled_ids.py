@@ -1,4 +1,4 @@
-"""The same poses with and without their vertex ids shuffled, through pipelines/scape.yaml (issue 22).
+"""The same poses with and without their vertex ids shuffled, through pipelines/scape.yaml.
 
 Writes a generated humanoid dataset (``write_humanoid_dataset``: template + ``--poses`` poses, the default
 pipeline's generator and mesh size) and a copy whose test meshes have their vertices in a random order (same
