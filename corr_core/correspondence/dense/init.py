@@ -318,7 +318,7 @@ def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarra
     return (*out[0][0], out[1]) if return_info else out[0]
 
 
-def hypotheses_to_refine(ranked: list[dict], keep_fraction: float = CHIRALITY_POOL,
+def hypotheses_to_refine(ranked: list[dict], *, keep_fraction: float = CHIRALITY_POOL,
                          wks_ratio: float = HYPOTHESIS_WKS_RATIO, at_least: int = MIN_HYPOTHESES,
                          at_most: int = MAX_HYPOTHESES) -> int:
     """How many of the ranked candidates (``rank_candidates``: dicts with "chirality" and "wks") to refine: at least
@@ -384,7 +384,7 @@ def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int | None = N
     return (maps, info) if return_info else maps
 
 
-def rank_candidates(candidates: list[dict], keep_fraction: float = CHIRALITY_POOL) -> list[dict]:
+def rank_candidates(candidates: list[dict], *, keep_fraction: float = CHIRALITY_POOL) -> list[dict]:
     """Candidates best first: those that keep the assigned points' orientation (chirality agreement above
     ``keep_fraction`` of the best candidate's, and > 0) by increasing WKS disagreement, then the others by
     decreasing chirality agreement.

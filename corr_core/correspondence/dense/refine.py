@@ -405,7 +405,7 @@ def map_distortion(source: MeshBasis, target: MeshBasis, p2p: np.ndarray) -> flo
 POINTS_TOLERANCE = 0.1   # units sqrt(target area): a given point's image this close to its given target counts
 
 
-def points_agreement(target: MeshBasis, p2p: np.ndarray, points_source: np.ndarray, points_target: np.ndarray,
+def points_agreement(target: MeshBasis, p2p: np.ndarray, points_source: np.ndarray, points_target: np.ndarray, *,
                      tolerance: float = POINTS_TOLERANCE) -> float:
     """Fraction of the given points that a dense map keeps: template point i's image is within ``tolerance``
     (3D distance / sqrt(target area)) of target point i. The confidence of a map made from given points (a map
@@ -422,7 +422,7 @@ MIN_POINTS_KEPT = 0.8     # another map replaces the one made from given points 
 
 
 def best_with_points(source: MeshBasis, target: MeshBasis, maps: list, points_source: np.ndarray,
-                     points_target: np.ndarray, min_kept: float = MIN_POINTS_KEPT, *,
+                     points_target: np.ndarray, *, min_kept: float = MIN_POINTS_KEPT,
                      known_distortions: Sequence[float | None] = ()) -> BestMap:
     """The least distorted of several refined maps (``map_distortion``) among those that keep the given points:
     ``maps[0]`` (the map made from them) always qualifies, any other one (e.g. the automatic map of the same pair)
