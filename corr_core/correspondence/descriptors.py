@@ -20,7 +20,7 @@ def _first_positive(evals: np.ndarray) -> int:
     return int(idx[0])
 
 
-def hks_times(evals: np.ndarray, n_times: int = 16) -> np.ndarray:
+def hks_times(evals: np.ndarray, *, n_times: int = 16) -> np.ndarray:
     """Sun et al. 2009 time range: ``n_times`` log-spaced times in [4 ln10 / lambda_max, 4 ln10 / lambda_1].
 
     Returns (n_times,) float, units area (1/eigenvalue units).
@@ -29,7 +29,7 @@ def hks_times(evals: np.ndarray, n_times: int = 16) -> np.ndarray:
     return np.geomspace(_LOG10_X4 / evals[-1], _LOG10_X4 / lam1, n_times)
 
 
-def hks(evals: np.ndarray, evecs: np.ndarray, times: np.ndarray | None = None, n_times: int = 16) -> np.ndarray:
+def hks(evals: np.ndarray, evecs: np.ndarray, times: np.ndarray | None = None, *, n_times: int = 16) -> np.ndarray:
     """Scaled Heat Kernel Signature.
 
     HKS(x, t) = sum_k exp(-lambda_k t) phi_k(x)^2, divided per time by the heat trace
@@ -38,17 +38,17 @@ def hks(evals: np.ndarray, evecs: np.ndarray, times: np.ndarray | None = None, n
 
     Args:
         evals: (k,) ascending eigenvalues; evecs: (n,k) M-orthonormal eigenvectors.
-        times: (T,) diffusion times (units area); default ``hks_times(evals, n_times)``.
+        times: (T,) diffusion times (units area); default ``hks_times(evals, n_times=n_times)``.
     Returns:
         (n, T) float descriptor.
     """
     evals = np.asarray(evals, dtype=np.float64)
-    t = hks_times(evals, n_times) if times is None else np.asarray(times, dtype=np.float64)
+    t = hks_times(evals, n_times=n_times) if times is None else np.asarray(times, dtype=np.float64)
     heat = np.exp(-np.outer(evals, t))  # (k, T)
     return (np.asarray(evecs, dtype=np.float64) ** 2 @ heat) / heat.sum(axis=0)
 
 
-def wks(evals: np.ndarray, evecs: np.ndarray, n_energies: int = 100, variance: float = 6.0) -> np.ndarray:
+def wks(evals: np.ndarray, evecs: np.ndarray, *, n_energies: int = 100, variance: float = 6.0) -> np.ndarray:
     """Wave Kernel Signature (Aubry, Schlickewei, Cremers 2011).
 
     Log-energies e_j are ``n_energies`` evenly spaced values in [log lambda_1, log lambda_max / 1.02]

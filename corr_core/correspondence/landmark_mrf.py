@@ -20,7 +20,7 @@ from corr_core.correspondence.matching import hungarian_match
 from corr_core.mrf import DensePairwise, energy, solve_lh
 
 
-def consistency_pairwise(dT: np.ndarray, dS: np.ndarray, sigma: float = 0.05) -> np.ndarray:
+def consistency_pairwise(dT: np.ndarray, dS: np.ndarray, *, sigma: float = 0.05) -> np.ndarray:
     """Pairwise weights W: (n, n, L, L) from template distances dT (n,n) and test distances dS (L,L).
 
     W[i,j,a,b] = exp(-(dT[i,j] - dS[a,b])^2 / (2 sigma)); zero when i == j or a == b. Symmetric:
@@ -42,7 +42,7 @@ def consistency_pairwise(dT: np.ndarray, dS: np.ndarray, sigma: float = 0.05) ->
     return W
 
 
-def descriptor_unary(cost: np.ndarray, weight: float = 1.0) -> np.ndarray:
+def descriptor_unary(cost: np.ndarray, *, weight: float = 1.0) -> np.ndarray:
     """Unary reward (n,L) from a descriptor distance matrix cost (n,L): weight * (1 - cost / max(cost)).
 
     Scaled to [0, weight] so that ``weight`` is comparable to one pairwise term (each lies in [0, 1]).
@@ -52,7 +52,7 @@ def descriptor_unary(cost: np.ndarray, weight: float = 1.0) -> np.ndarray:
     return weight * (1.0 - cost / top) if top > 0 else np.full(cost.shape, float(weight))
 
 
-def improve_by_exchanges(pairwise: DensePairwise, unary: np.ndarray, labels: np.ndarray, max_rounds: int = 100,
+def improve_by_exchanges(pairwise: DensePairwise, unary: np.ndarray, labels: np.ndarray, *, max_rounds: int = 100,
                          extra=None) -> np.ndarray:
     """Local search over one-to-one labelings: accept the best label exchange between two nodes (or a move to
     an unused label) while it raises the energy (+ ``extra(labels)`` if given). labels: (n,) distinct ints."""
@@ -82,7 +82,7 @@ def improve_by_exchanges(pairwise: DensePairwise, unary: np.ndarray, labels: np.
     return labels
 
 
-def match_landmarks_mrf(dT: np.ndarray, dS: np.ndarray, sigma: float = 0.05, unary: np.ndarray | None = None,
+def match_landmarks_mrf(dT: np.ndarray, dS: np.ndarray, *, sigma: float = 0.05, unary: np.ndarray | None = None,
                         refine: bool = True, return_result: bool = False):
     """Match n template landmarks to L >= n test landmarks by the geodesic-consistency MRF.
 
@@ -102,7 +102,7 @@ def match_landmarks_mrf(dT: np.ndarray, dS: np.ndarray, sigma: float = 0.05, una
     n, L = len(dT), len(dS)
     if n > L:
         raise ValueError(f"more template landmarks ({n}) than test landmarks ({L})")
-    pairwise = DensePairwise(consistency_pairwise(dT, dS, sigma))
+    pairwise = DensePairwise(consistency_pairwise(dT, dS, sigma=sigma))
     U = np.zeros((n, L)) if unary is None else np.asarray(unary, dtype=np.float64)
     if U.shape != (n, L):
         raise ValueError(f"unary must have shape {(n, L)}, got {U.shape}")

@@ -75,7 +75,7 @@ def geodesic_errors(V: np.ndarray, F: np.ndarray, pred_vids, true_vids) -> np.nd
     return err / np.sqrt(surface_area(V, F))
 
 
-def top_confusions(matrices: list[np.ndarray], rows: list[str], k: int = 10) -> dict[str, int]:
+def top_confusions(matrices: list[np.ndarray], rows: list[str], *, k: int = 10) -> dict[str, int]:
     """The k most frequent wrong correspondences 'A -> B' (rows[i] -> rows[j], i != j) over binary (n,n)
     correspondence matrices, with how many matrices (meshes) made them; most frequent first."""
     counts = np.sum(matrices, axis=0)

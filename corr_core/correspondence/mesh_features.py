@@ -22,7 +22,7 @@ from corr_core.geometry.sampling import farthest_point_samples
 __all__ = ["spectral_features", "geodesic_features", "flattening_features"]
 
 
-def spectral_features(V: np.ndarray, F: np.ndarray, landmark_vids: np.ndarray, k: int = 100, n_times: int = 16,
+def spectral_features(V: np.ndarray, F: np.ndarray, landmark_vids: np.ndarray, *, k: int = 100, n_times: int = 16,
                       n_energies: int = 100, wks_variance: float = 6.0) -> dict:
     """HKS and WKS at the landmark vertices from the first k Laplace-Beltrami eigenpairs.
 
@@ -53,7 +53,7 @@ def geodesic_features(V: np.ndarray, F: np.ndarray, landmark_vids: np.ndarray) -
 
 
 def flattening_features(V: np.ndarray, F: np.ndarray, landmark_vids: np.ndarray, Z: np.ndarray | None = None,
-                        sample_vids: np.ndarray | None = None, n_samples: int = 300) -> dict:
+                        sample_vids: np.ndarray | None = None, *, n_samples: int = 300) -> dict:
     """Mid-edge flattening (one complex point per edge, ``midedge.midedge_flatten``) and surface samples.
 
     Z: (E,) complex, a given flattening with the same edge numbering to use instead of the computed one.

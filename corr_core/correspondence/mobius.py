@@ -202,7 +202,7 @@ def triplet_pairs(n_source: int, n_target: int) -> tuple[np.ndarray, np.ndarray]
     return src, tgt
 
 
-def score_maps(ms: np.ndarray, mt: np.ndarray, Zs_samples: np.ndarray, Zt_samples: np.ndarray, K: float = 0.3,
+def score_maps(ms: np.ndarray, mt: np.ndarray, Zs_samples: np.ndarray, Zt_samples: np.ndarray, *, K: float = 0.3,
                metric: str = "plane", lam_s: np.ndarray | None = None, lam_t: np.ndarray | None = None,
                K_scale: float | None = None, chunk: int = 256) -> np.ndarray:
     """Score Möbius map pairs by the fraction of source samples mutually closest to a target sample within K.
@@ -233,7 +233,7 @@ def score_maps(ms: np.ndarray, mt: np.ndarray, Zs_samples: np.ndarray, Zt_sample
 
 
 def mobius_vote_landmarks(Zs_samples: np.ndarray, Zt_samples: np.ndarray, Zs_landmarks: np.ndarray,
-                          Zt_landmarks: np.ndarray, K: float = 0.3, metric: str = "plane",
+                          Zt_landmarks: np.ndarray, *, K: float = 0.3, metric: str = "plane",
                           n_best: int = 20, lam_samples: tuple | None = None,
                           lam_landmarks: tuple | None = None, power: float = 1.0,
                           K_scale: float | None = None) -> dict:
@@ -297,7 +297,7 @@ def mobius_vote_landmarks(Zs_samples: np.ndarray, Zt_samples: np.ndarray, Zs_lan
             "consensus_maps": [as_dict(t) for t in order[agrees[order]]]}
 
 
-def extend_landmarks(best_maps: list, Zs_all_landmarks: np.ndarray, Zt_candidates: np.ndarray, top: int = 10,
+def extend_landmarks(best_maps: list, Zs_all_landmarks: np.ndarray, Zt_candidates: np.ndarray, *, top: int = 10,
                      assign: bool = True, metric: str = "plane") -> np.ndarray:
     """Carry all source landmarks to the target with the best maps.
 

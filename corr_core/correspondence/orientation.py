@@ -35,7 +35,7 @@ def landmark_chirality(V: np.ndarray, F: np.ndarray, vids) -> np.ndarray:
     return det / np.maximum(length[:, :, None] * length[:, None, :], 1e-300)
 
 
-def reliable_triples(dT: np.ndarray, chiT: np.ndarray, radius: float | None = None, min_sine: float = 0.2,
+def reliable_triples(dT: np.ndarray, chiT: np.ndarray, radius: float | None = None, *, min_sine: float = 0.2,
                      min_count: int | None = None) -> np.ndarray:
     """Template triples whose chirality is trusted: all three pairwise normalized geodesic distances < radius
     (local, so bending does not flip it) and |chirality| >= min_sine (not nearly collinear).
@@ -67,7 +67,7 @@ def chirality_agreement(chiT: np.ndarray, chiS: np.ndarray, labels: np.ndarray, 
 
 
 def match_landmarks_oriented(dT: np.ndarray, dS: np.ndarray, chiT: np.ndarray, chiS: np.ndarray,
-                             sigma: float = 0.05, unary: np.ndarray | None = None, exclusion: float = 1.0,
+                             *, sigma: float = 0.05, unary: np.ndarray | None = None, exclusion: float = 1.0,
                              chirality_weight: float = 0.0, radius: float | None = None) -> np.ndarray:
     """Geodesic MRF plus orientation: resolves the left/right symmetry that ``match_landmarks_mrf`` cannot.
 
@@ -88,12 +88,12 @@ def match_landmarks_oriented(dT: np.ndarray, dS: np.ndarray, chiT: np.ndarray, c
     n, L = len(dT), len(dS)
     U = np.zeros((n, L)) if unary is None else np.asarray(unary, dtype=np.float64)
     mask = reliable_triples(dT, chiT, radius=radius)
-    p1 = match_landmarks_mrf(dT, dS, sigma, U)
+    p1 = match_landmarks_mrf(dT, dS, sigma=sigma, unary=U)
     U2 = U.copy()
     U2[np.arange(n), p1] -= exclusion
-    p2 = match_landmarks_mrf(dT, dS, sigma, U2)
+    p2 = match_landmarks_mrf(dT, dS, sigma=sigma, unary=U2)
     best = p1 if chirality_agreement(chiT, chiS, p1, mask) >= chirality_agreement(chiT, chiS, p2, mask) else p2
-    pairwise = DensePairwise(consistency_pairwise(dT, dS, sigma))
+    pairwise = DensePairwise(consistency_pairwise(dT, dS, sigma=sigma))
     extra = None
     if chirality_weight > 0 and mask.any():
         sign_t = np.sign(chiT[mask])

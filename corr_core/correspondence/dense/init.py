@@ -242,7 +242,7 @@ def hks_disagreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarr
     (the 180-degree turn swapping left/right *and* front/back preserves orientation)."""
     from corr_core.correspondence import descriptors as desc
 
-    times = desc.hks_times(source.evals, n_times)
+    times = desc.hks_times(source.evals, n_times=n_times)
     hs = desc.hks(source.evals, source.evecs[source.samples], times=times)
     ht = desc.hks(target.evals, target.evecs[p2p_samples], times=times)
     return float(np.mean(np.abs(hs - ht) / np.maximum(np.abs(hs) + np.abs(ht), 1e-300)))

@@ -37,7 +37,7 @@ def blob_and_copy():
 def test_descriptors_are_invariant_to_rigid_motion_and_vertex_order(blob_and_copy):
     (V, F, (ev, ph)), (V2, F2, (ev2, ph2)), perm = blob_and_copy
     np.testing.assert_allclose(ev2, ev, rtol=1e-6, atol=1e-9)
-    t = hks_times(ev, 16)
+    t = hks_times(ev, n_times=16)
     np.testing.assert_allclose(hks(ev2, ph2, times=t), hks(ev, ph, times=t)[perm], rtol=1e-5, atol=1e-9)
     np.testing.assert_allclose(wks(ev2, ph2), wks(ev, ph)[perm], rtol=1e-5, atol=1e-9)
 
@@ -68,7 +68,7 @@ def test_hks_and_wks_are_normalized_per_column(blob_and_copy):
 
 def test_hks_times_follow_sun_et_al():
     ev = np.array([0.0, 2.0, 5.0, 50.0])
-    t = hks_times(ev, 5)
+    t = hks_times(ev, n_times=5)
     assert t[0] == pytest.approx(4 * np.log(10) / 50.0)
     assert t[-1] == pytest.approx(4 * np.log(10) / 2.0)
     np.testing.assert_allclose(np.diff(np.log(t)), np.log(t[1] / t[0]))

@@ -48,4 +48,4 @@ def test_descriptor_unary_breaks_a_tie():
     target = np.array([2, 3, 0, 1])
     cost = np.ones((4, 4))
     cost[np.arange(4), target] = 0.0
-    np.testing.assert_array_equal(match_landmarks_mrf(d, d, unary=descriptor_unary(cost, 0.5)), target)
+    np.testing.assert_array_equal(match_landmarks_mrf(d, d, unary=descriptor_unary(cost, weight=0.5)), target)
