@@ -154,7 +154,7 @@ def energy(pairwise, unary: np.ndarray, labels: np.ndarray) -> float:
     return float(np.sum(unary * X) + 0.5 * np.sum(X * pairwise.matvec(X)))
 
 
-def climb(pairwise, unary: np.ndarray, labels0: np.ndarray, max_sweeps: int = 1000) -> tuple[np.ndarray, int]:
+def climb(pairwise, unary: np.ndarray, labels0: np.ndarray, *, max_sweeps: int = 1000) -> tuple[np.ndarray, int]:
     """Coordinate ascent from labels0: sweep nodes 0..n-1, move a node to its best label given the others if
     that raises E by more than a rounding-level epsilon; stop after a sweep without moves.
 
@@ -194,7 +194,7 @@ def random_labels(n: int, L: int, rng: np.random.Generator | int | None = None) 
     return rng.integers(0, L, size=n)
 
 
-def best_of_random_restarts(pairwise, unary: np.ndarray, n_restarts: int, seed: int = 0) -> tuple[np.ndarray, float]:
+def best_of_random_restarts(pairwise, unary: np.ndarray, n_restarts: int, *, seed: int = 0) -> tuple[np.ndarray, float]:
     """ICM from ``n_restarts`` uniformly random labelings; returns (best labels (n,) int, its energy)."""
     rng = np.random.default_rng(seed)
     best_labels, best_e = None, -np.inf
@@ -253,7 +253,7 @@ def _rows_to_simplex(X: np.ndarray) -> np.ndarray:
     return np.where(s > 0, P / np.where(s > 0, s, 1.0), 1.0 / X.shape[1])
 
 
-def solve_lh(pairwise, unary: np.ndarray, max_iter: int = 1000, tol: float = 1e-9,
+def solve_lh(pairwise, unary: np.ndarray, *, max_iter: int = 1000, tol: float = 1e-9,
              compute_bound: bool = True) -> LHResult:
     """Leordeanu & Hebert (ICML 2006) MAP approximation for the MRF (pairwise operator, unary (n,L)).
 

@@ -19,7 +19,7 @@ __all__ = ["make_chair", "canonical_chair", "write_chair_collection", "make_huma
            "make_humanoid_dataset", "write_humanoid_dataset", "write_default_data"]
 
 
-def write_default_data(out_dir: str | os.PathLike, seed: int = 0, n_chairs: int = 24, views: int = 16,
+def write_default_data(out_dir: str | os.PathLike, *, seed: int = 0, n_chairs: int = 24, views: int = 16,
                        n_poses: int = 6) -> dict:
     """Write both default data sets: ``out_dir/chairs`` (chair collection) and ``out_dir/scape`` (humanoid).
 

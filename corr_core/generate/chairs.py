@@ -39,7 +39,7 @@ def _grid_quad(corner: np.ndarray, du: np.ndarray, dv: np.ndarray, k: int) -> tu
     return V, F
 
 
-def box(center, half, R=None, k: int = 2, welded: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def box(center, half, R=None, *, k: int = 2, welded: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Triangulated box. center: (3,), half: (3,) half extents, R: (3,3) rotation (columns = box axes).
 
     Each side is a k x k grid (12 k^2 triangles). ``welded`` merges coincident vertices of neighbouring sides.
@@ -63,7 +63,7 @@ def box(center, half, R=None, k: int = 2, welded: bool = True) -> tuple[np.ndarr
     return (V * half) @ R.T + center, F
 
 
-def cylinder(a, b, radius: float, segments: int = 12, rings: int = 1, radius_b: float | None = None,
+def cylinder(a, b, radius: float, *, segments: int = 12, rings: int = 1, radius_b: float | None = None,
              ) -> tuple[np.ndarray, np.ndarray]:
     """Capped (possibly tapered) cylinder from point a (3,) to point b (3,). Returns V: (n,3), F: (m,3),
     outward-oriented (sides and caps)."""
@@ -106,7 +106,7 @@ def merge_parts(parts) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(Vs), np.concatenate(Fs).astype(np.int64)
 
 
-def weld(V: np.ndarray, F: np.ndarray, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
+def weld(V: np.ndarray, F: np.ndarray, *, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
     """Merge vertices that coincide up to ``tol``; drop faces that become degenerate. Keeps first-seen order."""
     key = np.round(V / tol).astype(np.int64)
     _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
@@ -312,7 +312,7 @@ def write_ground_truth(path: str | os.PathLike, names: list[str], steps: np.ndar
                         *(col[k] for col in extra.values())])
 
 
-def write_chair_collection(out_dir: str | os.PathLike, n: int = 24, seed: int = 0, views: int = 16,
+def write_chair_collection(out_dir: str | os.PathLike, *, n: int = 24, seed: int = 0, views: int = 16,
                            continuous: bool = False) -> dict:
     """Write ``n`` chairs ``001.obj``.. rotated by random known azimuths, plus ``ground_truth.csv``.
 

@@ -64,7 +64,7 @@ def table_kind(index: int) -> str:
     return TABLE_KINDS[(index - 1) % len(TABLE_KINDS)]
 
 
-def write_table_collection(out_dir: str | os.PathLike, n: int = 12, seed: int = 0, views: int = 16,
+def write_table_collection(out_dir: str | os.PathLike, *, n: int = 12, seed: int = 0, views: int = 16,
                            n_chairs: int = 0, continuous: bool = True) -> dict:
     """Write ``n`` tables (``001.obj``..) and then ``n_chairs`` chairs at known azimuths, plus
     ``ground_truth.csv`` (shape, azimuth_steps, azimuth_deg, kind, symmetry_order).

@@ -14,7 +14,7 @@ from corr_core.geometry.primitives import face_areas, unique_edges, vertex_compo
 
 
 def check_correspondence_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh",
-                              allow_components: bool = False, area_tol: float = 1e-12,
+                              allow_components: bool = False, *, area_tol: float = 1e-12,
                               allow_unreferenced: bool = True) -> list[str]:
     """Validate a mesh for spectral / geodesic correspondence.
 

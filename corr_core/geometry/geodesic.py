@@ -21,7 +21,7 @@ class GeodesicSolver:
     V: (n,3) float; F: (m,3) int; t_coef: heat time as a multiple of the mean edge length squared.
     """
 
-    def __init__(self, V: np.ndarray, F: np.ndarray, t_coef: float = 1.0):
+    def __init__(self, V: np.ndarray, F: np.ndarray, *, t_coef: float = 1.0):
         import potpourri3d as pp3d
 
         self.n_vertices = len(V)
@@ -46,7 +46,7 @@ class GeodesicSolver:
             out[row] = self.distance(int(s))
         return out
 
-    def diameter(self, rounds: int = 3, start: int = 0) -> float:
+    def diameter(self, *, rounds: int = 3, start: int = 0) -> float:
         """Approximate geodesic diameter by repeated double sweeps (farthest point from a vertex, then from it).
 
         Each sweep can only raise the estimate; it is a lower bound of the true diameter that is usually tight
@@ -71,10 +71,10 @@ def geodesic_distances(V: np.ndarray, F: np.ndarray, sources, solver: GeodesicSo
     return (GeodesicSolver(V, F) if solver is None else solver).distances(sources)
 
 
-def geodesic_diameter(V: np.ndarray, F: np.ndarray, rounds: int = 3, start: int = 0,
+def geodesic_diameter(V: np.ndarray, F: np.ndarray, *, rounds: int = 3, start: int = 0,
                       solver: GeodesicSolver | None = None) -> float:
     """Approximate geodesic diameter of (V, F), length units of V (see ``GeodesicSolver.diameter``)."""
-    return (GeodesicSolver(V, F) if solver is None else solver).diameter(rounds, start)
+    return (GeodesicSolver(V, F) if solver is None else solver).diameter(rounds=rounds, start=start)
 
 
 def landmark_geodesics(V: np.ndarray, F: np.ndarray, vids, normalize: bool = True) -> np.ndarray:

@@ -75,7 +75,7 @@ class IntrinsicMesh:
                 "remove the loose piece")
         return self._local[vids]
 
-    def to_full(self, values, fill=np.nan, axis: int = 0) -> np.ndarray:
+    def to_full(self, values, fill=np.nan, *, axis: int = 0) -> np.ndarray:
         """Scatter per-kept-vertex values (k, ...) (along ``axis``) to all n_full vertices; the vertices
         outside the kept component get ``fill`` (NaN; use -1 for integer ids)."""
         values = np.asarray(values)

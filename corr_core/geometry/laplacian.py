@@ -15,7 +15,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
 
-def laplacian_and_mass(V: np.ndarray, F: np.ndarray, mollify_factor: float = 1e-5) -> tuple[sp.csr_matrix, sp.dia_matrix]:
+def laplacian_and_mass(V: np.ndarray, F: np.ndarray, *,
+                       mollify_factor: float = 1e-5) -> tuple[sp.csr_matrix, sp.dia_matrix]:
     """Cotan stiffness and lumped (Voronoi-like) mass matrices of a triangle mesh.
 
     Args:
@@ -34,7 +35,7 @@ def laplacian_and_mass(V: np.ndarray, F: np.ndarray, mollify_factor: float = 1e-
     return sp.csr_matrix(L), sp.dia_matrix(M)
 
 
-def start_vector(n: int, seed: int = 0) -> np.ndarray:
+def start_vector(n: int, *, seed: int = 0) -> np.ndarray:
     """(n,) float64 fixed Lanczos start vector for ``eigsh``: the same inputs give bit-identical eigenpairs.
 
     Without ``v0`` ARPACK starts from a random vector, so eigenvectors differ by ~1e-15 from run to run, enough
@@ -44,7 +45,7 @@ def start_vector(n: int, seed: int = 0) -> np.ndarray:
     return np.random.default_rng(seed).uniform(-1.0, 1.0, n)
 
 
-def eigenpairs(V: np.ndarray, F: np.ndarray, k: int = 100, sigma: float = -1e-6) -> tuple[np.ndarray, np.ndarray]:
+def eigenpairs(V: np.ndarray, F: np.ndarray, *, k: int = 100, sigma: float = -1e-6) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` smallest Laplace–Beltrami eigenpairs of ``L phi = lambda M phi``.
 
     Uses scipy ``eigsh`` in shift-invert mode around a slightly negative ``sigma`` (``L - sigma M`` is then

@@ -100,7 +100,7 @@ def _drop_duplicates(F: np.ndarray, file_ids: np.ndarray, name: str, records: li
 
 
 def _drop_zero_area(V: np.ndarray, F: np.ndarray, file_ids: np.ndarray, name: str, records: list,
-                    area_tol: float = 1e-12) -> np.ndarray:
+                    *, area_tol: float = 1e-12) -> np.ndarray:
     """Keep-mask (m,) bool of the faces with area > area_tol * (bounding-box diagonal)^2."""
     tiny = area_tol * max(_bbox_diagonal2(V, F), np.finfo(float).tiny)
     bad = face_areas(V, F) <= tiny

@@ -6,7 +6,7 @@ from typing import Callable
 import numpy as np
 
 
-def farthest_point_samples(points: np.ndarray, k: int, start: int = 0,
+def farthest_point_samples(points: np.ndarray, k: int, *, start: int = 0,
                            distances: Callable[[int], np.ndarray] | None = None) -> np.ndarray:
     """Greedy farthest-point sampling.
 

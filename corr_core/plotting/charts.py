@@ -103,7 +103,7 @@ def plot_aligned_grid(views: dict, labels: dict, shapes: list[str], path) -> Non
     _save(fig, path, 90)
 
 
-def plot_contact_sheet(views: dict, names: list[str], labels: np.ndarray, path, columns: int = 10) -> None:
+def plot_contact_sheet(views: dict, names: list[str], labels: np.ndarray, path, *, columns: int = 10) -> None:
     """All shapes' aligned view 0 in one image (to check an alignment by eye), ``columns`` per row."""
     plt = pyplot()
     rows = int(np.ceil(len(names) / columns))

@@ -62,7 +62,7 @@ def _rays(view: int, n_views: int, size: int, elevation_deg: float):
     return load_open3d().core.Tensor(view_rays(n_views, size, elevation_deg, MARGIN)[view])
 
 
-def render_colored(V: np.ndarray, F: np.ndarray, colors: np.ndarray, view: int = 0, n_views: int = 8,
+def render_colored(V: np.ndarray, F: np.ndarray, colors: np.ndarray, *, view: int = 0, n_views: int = 8,
                    size: int = 320, elevation_deg: float = 10.0, ambient: float = 0.35) -> np.ndarray:
     """Render a normalised mesh with per-vertex colours (interpolated over each triangle), headlight shading.
 
@@ -91,7 +91,7 @@ def render_colored(V: np.ndarray, F: np.ndarray, colors: np.ndarray, view: int =
     return image
 
 
-def project_vertices(V: np.ndarray, F: np.ndarray, vids: np.ndarray, view: int = 0, n_views: int = 8,
+def project_vertices(V: np.ndarray, F: np.ndarray, vids: np.ndarray, *, view: int = 0, n_views: int = 8,
                      size: int = 320, elevation_deg: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
     """Pixel positions of vertices ``vids`` (k,) in the picture of :func:`render_colored`, and whether each is
     visible (not hidden by the surface).
@@ -148,7 +148,7 @@ def pull_back_colors(template_colors: np.ndarray, vertex_map: np.ndarray, target
 GREY = np.array([0.78, 0.78, 0.80])
 
 
-def crop_box(images: list[np.ndarray], pad: int = 6) -> tuple[slice, slice]:
+def crop_box(images: list[np.ndarray], *, pad: int = 6) -> tuple[slice, slice]:
     """(rows, columns) slices of the smallest box holding every non-white pixel of the (S,S,3) images, padded."""
     ink = np.zeros(images[0].shape[:2], bool)
     for im in images:
@@ -186,7 +186,7 @@ def fit_title(text: str, width_in: float, fontsize: float) -> str:
     return "\n".join(part for line in text.split("\n") for part in textwrap.wrap(line, chars) or [""])
 
 
-def view_name(view: int, n_views: int = 8) -> str:
+def view_name(view: int, *, n_views: int = 8) -> str:
     """How a figure names camera ``view`` of ``n_views`` (azimuth view * 360 / n_views degrees; 0: the front)."""
     az = view * 360.0 / n_views
     return "front view" if view == 0 else f"view turned {az:g}\N{DEGREE SIGN}"
@@ -272,7 +272,7 @@ def _label_points(fig, ax, xy: np.ndarray, texts: list[str], colours: list[str],
 
 
 def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, predictions: dict,
-                         names: list[str], title: str, path, views: tuple[int, ...] = (0, 1), n_views: int = 8,
+                         names: list[str], title: str, path, views: tuple[int, ...] = (0, 1), *, n_views: int = 8,
                          size: int = 300, wrap: int | None = None, legend: bool = True) -> dict:
     """The template and some test poses side by side with the landmarks as numbered dots.
 
@@ -298,9 +298,9 @@ def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, pred
         pred = np.arange(L) if name == "template" else np.asarray(predictions[name], np.int64)
         own = np.asarray(landmark_vids[name], np.int64)
         for r, view in enumerate(views):
-            image = render_colored(Vn, F, np.tile(GREY, (len(Vn), 1)), view, n_views, size)
-            xy, visible = project_vertices(Vn, F, own[pred], view, n_views, size)
-            xy_true, visible_true = project_vertices(Vn, F, own, view, n_views, size)
+            image = render_colored(Vn, F, np.tile(GREY, (len(Vn), 1)), view=view, n_views=n_views, size=size)
+            xy, visible = project_vertices(Vn, F, own[pred], view=view, n_views=n_views, size=size)
+            xy_true, visible_true = project_vertices(Vn, F, own, view=view, n_views=n_views, size=size)
             panels.append((name, r, view, image, xy, visible, pred == np.arange(L), xy_true, visible_true))
     box = crop_box([p[3] for p in panels])
     n_panels = len(poses) + 1
@@ -312,7 +312,7 @@ def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, pred
     panel_w, panel_h = 3.0 * aspect, 3.2
     legend_w = (0.35 + 0.075 * LABEL_PT / 9 * max((len(n) for n in names), default=4)) if legend else 0.0
     widths = [panel_w] * n_cols + ([legend_w] if legend else [])
-    cameras = "" if n_cols == n_panels else f" ({view_name(views[0], n_views)})"
+    cameras = "" if n_cols == n_panels else f" ({view_name(views[0], n_views=n_views)})"
     suptitle = fit_title(title + cameras + "\ngreen: right; red x: wrong, a red line to the true landmark (blue "
                          "ring); faint: hidden from this side", sum(widths) + 0.4, 10)
     top_in = 0.55 + 0.2 * (suptitle.count("\n") + 1)    # the title's lines, then the panels' two-line titles
@@ -325,7 +325,7 @@ def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, pred
     for ax in axes.ravel():
         ax.axis("off")
     labelled = []
-    title_of = lambda k: f"{panels[k][0]}, {view_name(panels[k][2], n_views)}"  # noqa: E731
+    title_of = lambda k: f"{panels[k][0]}, {view_name(panels[k][2], n_views=n_views)}"  # noqa: E731
     for k, (name, r, view, image, xy, visible, right, xy_true, visible_true) in enumerate(panels):
         ax = axes[place(k, r)]
         ax.axis("on")
@@ -347,7 +347,7 @@ def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, pred
             ax.set_title(name if name == "template" else f"{name}\n{len(right) - wrong}/{len(right)} right",
                          fontsize=9, color="k" if wrong == 0 else "#aa0000")
         if place(k, r)[1] == 0 and n_cols == n_panels:
-            ax.set_ylabel(view_name(view, n_views), fontsize=9)
+            ax.set_ylabel(view_name(view, n_views=n_views), fontsize=9)
         labelled.append((ax, xy, right, alpha, xy_true[~right]))
     fig.canvas.draw()   # the axes take their final (equal-aspect) boxes: labels are placed in final pixels
     for ax, xy, right, alpha, others in labelled:
@@ -385,7 +385,7 @@ def _drawn(fig, axes: list) -> dict:
 
 
 def plot_dense_panels(template: tuple, poses: dict, vertex_maps: dict, captions: dict, title: str, path,
-                      views: tuple[int, ...] = (0, 1), n_views: int = 8, size: int = 300) -> None:
+                      views: tuple[int, ...] = (0, 1), *, n_views: int = 8, size: int = 300) -> None:
     """The template coloured by its coordinates as RGB, and each pose coloured by that function pulled back
     through a dense map (same colour = corresponding point; a right map gives the template's pattern).
 
@@ -401,7 +401,8 @@ def plot_dense_panels(template: tuple, poses: dict, vertex_maps: dict, captions:
     columns = [("template", Vt, Ft, colors)] + [(n, V, F, pull_back_colors(colors, vertex_maps[n], V))
                                                 for n, (V, F) in poses.items()]
     axis = up_axis(Vt)
-    panels = [(name, r, render_colored(normalise_for_picture(stand_up(V, axis)), F, col, view, n_views, size))
+    panels = [(name, r, render_colored(normalise_for_picture(stand_up(V, axis)), F, col, view=view, n_views=n_views,
+                                       size=size))
               for name, V, F, col in columns for r, view in enumerate(views)]
     box = crop_box([p[2] for p in panels])
     aspect = (box[1].stop - box[1].start) / (box[0].stop - box[0].start) if box[0].start is not None else 1.0
@@ -416,7 +417,7 @@ def plot_dense_panels(template: tuple, poses: dict, vertex_maps: dict, captions:
         if r == 0:
             ax.set_title(name + (f"\n{captions[name]}" if name in captions else ""), fontsize=9)
         if k < len(views):
-            ax.set_ylabel(view_name(views[r], n_views), fontsize=9)
+            ax.set_ylabel(view_name(views[r], n_views=n_views), fontsize=9)
     fig.suptitle(suptitle, fontsize=10)
     fig.tight_layout(rect=(0, 0, 1, 1 - top / fig.get_figheight()))
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
@@ -453,7 +454,7 @@ def plot_azimuths(true_deg: np.ndarray, recovered_deg: np.ndarray, names: list[s
 
 
 # ------------------------------------------------------------------------------------ per-method figure sets
-def spread_best_to_worst(names_by_score: list[str], k: int = 4) -> list[str]:
+def spread_best_to_worst(names_by_score: list[str], *, k: int = 4) -> list[str]:
     """Up to ``k`` names from a best-to-worst list, evenly spaced: always the first (best) and the last (worst)."""
     if len(names_by_score) <= k:
         return list(names_by_score)
@@ -462,7 +463,7 @@ def spread_best_to_worst(names_by_score: list[str], k: int = 4) -> list[str]:
 
 
 def plot_landmark_methods(template: tuple, meshes: dict, landmark_vids, names: list[str],
-                          methods: dict, out_dir: str, views: tuple[int, ...] = (0, 1), max_poses: int = 4,
+                          methods: dict, out_dir: str, views: tuple[int, ...] = (0, 1), *, max_poses: int = 4,
                           worst_file: str = "landmarks_worst_per_method.png") -> tuple[list[str], dict]:
     """Per landmark method, the template and up to ``max_poses`` test poses (best .. worst by accuracy) with the
     predicted landmarks as numbered dots (``landmarks_<method>.png``), and one picture of every method's worst pose
@@ -480,7 +481,7 @@ def plot_landmark_methods(template: tuple, meshes: dict, landmark_vids, names: l
     figures, shown = [], {}
     for method, preds in methods.items():
         accuracy = {m: float(np.mean(p == np.arange(len(p)))) for m, p in preds.items()}
-        poses = spread_best_to_worst(sorted(preds, key=lambda m: (-accuracy[m], m)), max_poses)
+        poses = spread_best_to_worst(sorted(preds, key=lambda m: (-accuracy[m], m)), k=max_poses)
         file = f"landmarks_{method}.png"
         mean = float(np.mean(list(accuracy.values())))
         plot_landmark_panels(template, {m: meshes[m] for m in poses},
@@ -503,7 +504,7 @@ def plot_landmark_methods(template: tuple, meshes: dict, landmark_vids, names: l
 
 
 def plot_dense_methods(template: tuple, meshes: dict, vertex_maps: dict, errors: dict, out_dir: str,
-                       views: tuple[int, ...] = (0, 1), max_poses: int = 4) -> list[str]:
+                       views: tuple[int, ...] = (0, 1), *, max_poses: int = 4) -> list[str]:
     """Per dense method, the template coloured by its coordinates and up to ``max_poses`` test poses coloured by
     that function pulled back through the method's map, best .. worst by ``errors`` (``dense_<method>.png``).
 
@@ -517,7 +518,7 @@ def plot_dense_methods(template: tuple, meshes: dict, vertex_maps: dict, errors:
     for method, maps in vertex_maps.items():
         err = errors.get(method, {})
         order = sorted(maps, key=lambda m: (err.get(m) is None, err.get(m) or 0.0, m))
-        poses = spread_best_to_worst(order, max_poses)
+        poses = spread_best_to_worst(order, k=max_poses)
         captions = {m: f"mean geodesic error {err[m]:.3f}" for m in poses if err.get(m) is not None}
         file = f"dense_{method}.png"
         plot_dense_panels(template, {m: meshes[m] for m in poses}, {m: maps[m] for m in poses}, captions,

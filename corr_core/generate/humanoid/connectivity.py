@@ -30,7 +30,7 @@ def _decimate(V: np.ndarray, F: np.ndarray, fraction: float) -> tuple[np.ndarray
     return np.asarray(m.vertices, np.float64), np.asarray(m.triangles, np.int64)
 
 
-def remesh(V: np.ndarray, F: np.ndarray, kind: str, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def remesh(V: np.ndarray, F: np.ndarray, kind: str, *, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The same surface with another triangulation and vertex order, and the true map onto it.
 
     kind "subdivided": midpoint subdivision (exact: vertex i stays a vertex); "decimated": quadric decimation to

@@ -15,7 +15,7 @@ from corr_core.generate.humanoid.posing import pose_mesh, random_pose, skinning_
 from corr_core.geometry.mesh_io import save_obj
 
 
-def make_humanoid_dataset(n_poses: int = 6, seed: int = 0, vary_bodies: bool = False,
+def make_humanoid_dataset(*, n_poses: int = 6, seed: int = 0, vary_bodies: bool = False,
                           grid_step: float = DEFAULT_GRID_STEP):
     """Rest mesh, posed meshes and landmarks, in memory.
 
@@ -26,7 +26,7 @@ def make_humanoid_dataset(n_poses: int = 6, seed: int = 0, vary_bodies: bool = F
     Returns: (V_rest (n,3), F (m,3), poses list of (n,3) arrays, pose parameters list of dicts,
     landmarks dict name -> vertex id, bodies list of dicts (all 1.0 without ``vary_bodies``)).
     """
-    V, F = make_humanoid_rest(grid_step)
+    V, F = make_humanoid_rest(grid_step=grid_step)
     W, _ = skinning_weights(V, F)
     rng = np.random.default_rng(seed)
     params = [random_pose(rng) for _ in range(n_poses)]
@@ -39,7 +39,7 @@ def make_humanoid_dataset(n_poses: int = 6, seed: int = 0, vary_bodies: bool = F
     return V, F, posed, params, landmark_vertices(V), bodies
 
 
-def write_humanoid_dataset(out_dir: str | os.PathLike, n_poses: int = 6, seed: int = 0, vary_bodies: bool = False,
+def write_humanoid_dataset(out_dir: str | os.PathLike, *, n_poses: int = 6, seed: int = 0, vary_bodies: bool = False,
                            remeshed: tuple[str, ...] | list[str] = (), grid_step: float = DEFAULT_GRID_STEP) -> dict:
     """Write the course layout: ``meshes/template/mesh000.obj`` (rest pose), ``meshes/test/meshNNN.obj``
     (NNN = 001..n_poses, random poses drawn from ``np.random.default_rng(seed)``), ``landmark_vids.txt`` and
@@ -57,7 +57,7 @@ def write_humanoid_dataset(out_dir: str | os.PathLike, n_poses: int = 6, seed: i
     out = Path(out_dir)
     (out / "meshes" / "template").mkdir(parents=True, exist_ok=True)
     (out / "meshes" / "test").mkdir(parents=True, exist_ok=True)
-    V, F, posed, params, lms, bodies = make_humanoid_dataset(n_poses, seed, vary_bodies=vary_bodies,
+    V, F, posed, params, lms, bodies = make_humanoid_dataset(n_poses=n_poses, seed=seed, vary_bodies=vary_bodies,
                                                              grid_step=grid_step)
     if len(remeshed) > n_poses:
         raise ValueError(f"remeshed: {len(remeshed)} kinds but only {n_poses} poses to remesh")

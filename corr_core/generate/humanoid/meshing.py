@@ -36,7 +36,7 @@ def _mirror_half(V: np.ndarray, F: np.ndarray, mid: np.ndarray) -> tuple[np.ndar
     return np.concatenate([V, Vm]), np.concatenate([F, mirror_id[F][:, ::-1]])
 
 
-def _project_to_surface(P: np.ndarray, iters: int = 2, eps: float = 1e-5) -> np.ndarray:
+def _project_to_surface(P: np.ndarray, *, iters: int = 2, eps: float = 1e-5) -> np.ndarray:
     """Newton-project points P: (n,3) onto the zero set of ``body_sdf`` (forward-difference gradient)."""
     n = len(P)
     for _ in range(iters):
@@ -47,7 +47,7 @@ def _project_to_surface(P: np.ndarray, iters: int = 2, eps: float = 1e-5) -> np.
     return P
 
 
-def mirror_pairs(V: np.ndarray, tol: float = 1e-5) -> np.ndarray | None:
+def mirror_pairs(V: np.ndarray, *, tol: float = 1e-5) -> np.ndarray | None:
     """(n,) index of each vertex's mirror image (x -> -x) in V: (n,3), or None if the set is not symmetric."""
     from scipy.spatial import cKDTree
 
@@ -57,7 +57,7 @@ def mirror_pairs(V: np.ndarray, tol: float = 1e-5) -> np.ndarray | None:
     return pair
 
 
-def _relax(V: np.ndarray, F: np.ndarray, iters: int = 6, step: float = 0.5) -> np.ndarray:
+def _relax(V: np.ndarray, F: np.ndarray, *, iters: int = 6, step: float = 0.5) -> np.ndarray:
     """Tangential uniform-Laplacian relaxation with re-projection onto the implicit surface.
 
     Marching cubes on the mirror-symmetric grid gives an exactly symmetric vertex set, but its triangulation is not
@@ -79,7 +79,7 @@ def _relax(V: np.ndarray, F: np.ndarray, iters: int = 6, step: float = 0.5) -> n
 DEFAULT_GRID_STEP = 0.0225  # metres: about 4-5 thousand vertices
 
 
-def make_humanoid_rest(grid_step: float = DEFAULT_GRID_STEP) -> tuple[np.ndarray, np.ndarray]:
+def make_humanoid_rest(*, grid_step: float = DEFAULT_GRID_STEP) -> tuple[np.ndarray, np.ndarray]:
     """The rest-pose surface mesh. Returns V: (n,3) float metres, F: (m,3) int, outward oriented, closed.
 
     Exactly left/right symmetric by construction: the x >= 0 half is meshed (marching cubes), its midplane cap is cut

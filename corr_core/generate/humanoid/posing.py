@@ -13,7 +13,7 @@ def _segment_distance(P: np.ndarray, a, b) -> np.ndarray:
     return round_cone(P, a, b, 0.0, 0.0)
 
 
-def skinning_weights(V: np.ndarray, F: np.ndarray, smooth_iters: int = 60) -> tuple[np.ndarray, list[str]]:
+def skinning_weights(V: np.ndarray, F: np.ndarray, *, smooth_iters: int = 60) -> tuple[np.ndarray, list[str]]:
     """Smooth LBS weights. Returns W: (n, B) rows summing to 1 and the B bone names.
 
     Each vertex is first assigned to the bone with the smallest radius-normalised distance; the one-hot labels are

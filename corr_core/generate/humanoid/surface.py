@@ -6,7 +6,7 @@ import numpy as np
 from corr_core.generate.humanoid.rig import skeleton
 
 
-def round_cone(P: np.ndarray, a, b, ra: float, rb: float, squash_z: float = 1.0) -> np.ndarray:
+def round_cone(P: np.ndarray, a, b, ra: float, rb: float, *, squash_z: float = 1.0) -> np.ndarray:
     """Approximate signed distance of points P: (n,3) to a capsule a->b with radius ra..rb (linear)."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     ab = b - a

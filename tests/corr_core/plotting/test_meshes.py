@@ -157,7 +157,7 @@ def test_landmark_figure_one_known_mistake(tmp_path):
     assert [panel for panel, _ in lines] == ["pose, front view", "pose, view turned 45\N{DEGREE SIGN}"]
     for view, (_, (x0, y0, x1, y1)) in zip((0, 1), lines):
         Vn = pm.normalise_for_picture(pm.stand_up(V, pm.up_axis(V)))
-        xy, _ = pm.project_vertices(Vn, F, front[[5, 2]], view, 8, 300)
+        xy, _ = pm.project_vertices(Vn, F, front[[5, 2]], view=view, n_views=8, size=300)
         assert np.allclose([x0, y0], xy[0]) and np.allclose([x1, y1], xy[1])   # placed -> true
     labels = drawn["labels"]
     assert len(labels) == 4 * 8 and min(size for _, _, size, _ in labels) >= 9

@@ -54,15 +54,15 @@ def test_basis_eigenpairs_are_bit_identical_run_to_run(ellipsoid):
 
 def _plain_farthest_samples(V, k, start):
     """The sampler's greedy rule with numpy's own norm per step (the reference of its buffered fast path)."""
-    return farthest_point_samples(V, k, start, distances=lambda i: np.linalg.norm(V - V[i], axis=1))
+    return farthest_point_samples(V, k, start=start, distances=lambda i: np.linalg.norm(V - V[i], axis=1))
 
 
 def test_farthest_samples_equal_the_plain_greedy_rule(ellipsoid):
     V, _ = ellipsoid
     V = np.vstack([V, V[:3]])                             # duplicated points: ties and zero distances
     for start in (0, 7):
-        assert np.array_equal(farthest_point_samples(V, 200, start), _plain_farthest_samples(V, 200, start))
-    assert np.array_equal(farthest_point_samples(V, len(V), 0), _plain_farthest_samples(V, len(V), 0))
+        assert np.array_equal(farthest_point_samples(V, 200, start=start), _plain_farthest_samples(V, 200, start))
+    assert np.array_equal(farthest_point_samples(V, len(V), start=0), _plain_farthest_samples(V, len(V), 0))
 
 
 def test_nearest_rows_is_the_exact_nearest_neighbour_with_lowest_index_ties():
