@@ -15,6 +15,10 @@ Ry(s * step) moves what camera k saw to camera k + s:
 Projection is orthographic with a square window of half-width ``margin`` world units centred on the
 origin, so a normalized mesh (centred, radius <= 1) is always fully in view.
 
+Ray casting: all views in one call, and only the rays of pixels inside the image-plane bounding box of some
+face (``pixels_in_face_boxes``; the other rays cannot hit anything): the same rays as casting every pixel's,
+hence the same hits, at a fraction of the cost (a chair covers ~1/6 of its views).
+
 Shading: white background (1.0); surface = ambient + diffuse * |n . d| with d the ray direction (a
 headlight attached to the camera) and n the face normal. The absolute value makes shading
 double-sided, as the meshes are not watertight and their normals are not consistently oriented.
