@@ -143,6 +143,9 @@ def engine_seconds(tree: str, n: int, workers: int, work: str, tag: str) -> dict
 
 def main() -> None:
     if len(sys.argv) == 5 and sys.argv[1] == "--child":
+        # the tree under test comes from PYTHONPATH; bench/ itself (sys.path[0]) must not shadow any module
+        here = os.path.dirname(os.path.abspath(__file__))
+        sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != here]
         time_tree(sys.argv[2], sys.argv[3], sys.argv[4] or None)
         return
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
