@@ -179,7 +179,7 @@ def render_views(
     size = image_size * supersample
     rays = _cached_view_rays(n_views, size, float(elevation_deg), float(margin))
     # one cast for all views, of the rays that can hit a face only (every other ray misses): the same rays,
-    # so the same hits as casting them all, at a fraction of the cost (a chair covers ~1/5 of a view)
+    # so the same hits as casting them all, at a fraction of the cost (a chair covers ~1/6 of a view)
     cast = np.flatnonzero(pixels_in_face_boxes(V, F, n_views, size, elevation_deg, margin))
     images = np.ones((n_views, size, size), np.float32)
     if len(cast) == 0:

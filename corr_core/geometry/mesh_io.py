@@ -13,7 +13,8 @@ Formats and readers:
   coordinates / normals (``f 1/1 ...`` vs ``f 1/2 ...``) and does not resolve negative indices, and its OFF
   loader fails on files mixing triangles and polygons: both would change vertex ids. OBJ: ``v`` and ``f`` lines
   (``f a``, ``f a/b``, ``f a//c``, ``f a/b/c``, negative = relative to the vertices read so far); ``vt``,
-  ``vn``, materials, groups and objects are ignored (alignment and correspondence need geometry only).
+  ``vn``, materials, groups and objects are ignored (alignment and correspondence need geometry only). A file of
+  only ``v x y z`` / ``f a b c`` lines is parsed in a few vectorized passes, to the same arrays.
 """
 from __future__ import annotations
 
