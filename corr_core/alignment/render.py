@@ -15,6 +15,10 @@ Ry(s * step) moves what camera k saw to camera k + s:
 Projection is orthographic with a square window of half-width ``margin`` world units centred on the
 origin, so a normalized mesh (centred, radius <= 1) is always fully in view.
 
+Ray casting: all views in one call, and only the rays of pixels inside the image-plane bounding box of some
+face (``pixels_in_face_boxes``; the other rays cannot hit anything): the same rays as casting every pixel's,
+hence the same hits, at a fraction of the cost (a chair covers ~1/6 of its views).
+
 Shading: white background (1.0); surface = ambient + diffuse * |n . d| with d the ray direction (a
 headlight attached to the camera) and n the face normal. The absolute value makes shading
 double-sided, as the meshes are not watertight and their normals are not consistently oriented.
@@ -76,9 +80,59 @@ def view_rays(
 
 
 @functools.lru_cache(maxsize=8)
-def _cached_view_rays(n_views: int, image_size: int, elevation_deg: float, margin: float):
-    """``view_rays`` as an Open3D tensor, cached: the rays only depend on the camera parameters."""
-    return load_open3d().core.Tensor(view_rays(n_views, image_size, elevation_deg, margin))
+def _cached_view_rays(n_views: int, image_size: int, elevation_deg: float, margin: float) -> np.ndarray:
+    """``view_rays`` flattened to (n_views * size * size, 6), cached (read-only): the rays only depend on the
+    camera parameters."""
+    rays = view_rays(n_views, image_size, elevation_deg, margin).reshape(-1, 6)
+    rays.setflags(write=False)
+    return rays
+
+
+def pixels_in_face_boxes(
+    V: np.ndarray, F: np.ndarray, n_views: int = 16, image_size: int = 120, elevation_deg: float = 20.0,
+    margin: float = 1.05,
+) -> np.ndarray:
+    """Pixels whose ray can hit a face: those inside the image-plane bounding box of some face, per view.
+
+    A ray of view k runs along -back_k through the point u * right_k + v * up_k (``view_rays``), so it can
+    only meet face f if (u, v) lies in the box spanned by the projections (V @ right_k, V @ up_k) of f's
+    corners. Each box is grown by half a pixel (far beyond the float32 rounding of rays and vertices, ~1e-6
+    world units), so every pixel outside all boxes is certainly a miss. The union of the boxes is built with
+    a 2D difference array (+-1 at the box corners, then cumulative sums): no loop over faces or views.
+
+    Args:
+        V: (n, 3) float vertices; F: (m, 3) int triangles; the other arguments as in ``view_rays``.
+    Returns:
+        (n_views, image_size, image_size) bool, True where a ray must be cast.
+    """
+    frames = camera_frames(n_views, elevation_deg)
+    F = np.asarray(F)
+    u = np.asarray(V, dtype=np.float64) @ frames[:, :2].reshape(-1, 3).T  # (n, 2 k): image x, y per view
+    a, b, c = u[F[:, 0]].T, u[F[:, 1]].T, u[F[:, 2]].T  # (2 k, m): the three corners of every face
+    low, high = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+    pixel = 2.0 * margin / image_size
+    grow = 0.5 * pixel
+    # pixel centre j sits at x = ((j + 0.5) / size * 2 - 1) * margin, i.e. j = (x + margin) / pixel - 0.5;
+    # row i at y = -((i + 0.5) / size * 2 - 1) * margin (rows run top -> bottom)
+    col_lo = np.ceil((low[0::2] - grow + margin) / pixel - 0.5)  # (k, m)
+    col_hi = np.floor((high[0::2] + grow + margin) / pixel - 0.5)
+    row_lo = np.ceil((margin - high[1::2] - grow) / pixel - 0.5)
+    row_hi = np.floor((margin - low[1::2] + grow) / pixel - 0.5)
+    last = image_size - 1
+    inside = (col_hi >= 0) & (col_lo <= last) & (row_hi >= 0) & (row_lo <= last)
+    view = np.broadcast_to(np.arange(n_views)[:, None], inside.shape)[inside]
+    c0 = np.clip(col_lo[inside], 0, last).astype(np.intp)
+    c1 = np.clip(col_hi[inside], 0, last).astype(np.intp) + 1
+    r0 = np.clip(row_lo[inside], 0, last).astype(np.intp)
+    r1 = np.clip(row_hi[inside], 0, last).astype(np.intp) + 1
+    side = image_size + 1
+    top, bottom = view * (side * side) + r0 * side, view * (side * side) + r1 * side
+    n_cells = n_views * side * side
+    marks = (np.bincount(np.concatenate([top + c0, bottom + c1]), minlength=n_cells)
+             - np.bincount(np.concatenate([top + c1, bottom + c0]), minlength=n_cells))
+    marks = marks.astype(np.int32).reshape(n_views, side, side)
+    count = np.cumsum(np.cumsum(marks, axis=1, dtype=np.int32), axis=2, dtype=np.int32)
+    return count[:, :image_size, :image_size] > 0
 
 
 def render_views(
@@ -124,16 +178,28 @@ def render_views(
 
     size = image_size * supersample
     rays = _cached_view_rays(n_views, size, float(elevation_deg), float(margin))
-    face = scene.cast_rays(rays)["primitive_ids"].numpy()  # (n_views, size, size) uint32
+    # one cast for all views, of the rays that can hit a face only (every other ray misses): the same rays,
+    # so the same hits as casting them all, at a fraction of the cost (a chair covers ~1/6 of a view)
+    cast = np.flatnonzero(pixels_in_face_boxes(V, F, n_views, size, elevation_deg, margin))
+    images = np.ones((n_views, size, size), np.float32)
+    if len(cast) == 0:
+        return _downsample(images, image_size, supersample)
+    face = scene.cast_rays(o3d.core.Tensor(rays[cast]))["primitive_ids"].numpy()  # (len(cast),) uint32
     hit = face != scene.INVALID_ID
-    view_of_hit = np.nonzero(hit)[0]
+    pixel = cast[hit]
+    view_of_hit = pixel // (size * size)
 
     # the headlight direction is constant per view: |n . d| for every (face, view) pair at once
     backs = camera_frames(n_views, elevation_deg)[:, 2].astype(np.float32)  # -d per view
     cosine = np.abs(np.einsum("fi,vi->fv", face_normals(V, F).astype(np.float32), backs))  # (m, n_views)
     shade = ambient + diffuse * cosine
-    images = np.ones((n_views, size, size), np.float32)
-    images[hit] = shade[face[hit], view_of_hit]
+    images.reshape(-1)[pixel] = shade[face[hit], view_of_hit]
+    return _downsample(images, image_size, supersample)
+
+
+def _downsample(images: np.ndarray, image_size: int, supersample: int) -> np.ndarray:
+    """Box-average (n_views, size, size) renders at ``supersample`` x resolution down to ``image_size``."""
     if supersample > 1:
+        n_views = len(images)
         images = images.reshape(n_views, image_size, supersample, image_size, supersample).mean(axis=(2, 4))
     return images

@@ -13,7 +13,8 @@ Formats and readers:
   coordinates / normals (``f 1/1 ...`` vs ``f 1/2 ...``) and does not resolve negative indices, and its OFF
   loader fails on files mixing triangles and polygons: both would change vertex ids. OBJ: ``v`` and ``f`` lines
   (``f a``, ``f a/b``, ``f a//c``, ``f a/b/c``, negative = relative to the vertices read so far); ``vt``,
-  ``vn``, materials, groups and objects are ignored (alignment and correspondence need geometry only).
+  ``vn``, materials, groups and objects are ignored (alignment and correspondence need geometry only). A file of
+  only ``v x y z`` / ``f a b c`` lines is parsed in a few vectorized passes, to the same arrays.
 """
 from __future__ import annotations
 
@@ -121,7 +122,54 @@ def _obj_index(token: str, n_read: int, path: str, line_no: int) -> int:
     return i - 1 if i > 0 else n_read + i
 
 
+_OBJ_KEYWORDS = {b"v": 0, b"f": 1}
+
+
+def _read_plain_obj(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
+    """The common OBJ layout in a few vectorized passes, or None for anything else (the caller then reads the
+    file line by line, which gives the same result, or the error message naming the line).
+
+    Accepted: printable ASCII, spaces, tabs and ``\\n`` only; every non-blank line is ``v x y z`` or ``f a b c``
+    (exactly four tokens, indices positive integers without ``/``), as ``save_obj`` and most exporters write.
+    Numbers are converted by Python's ``float`` / ``int``, like the line reader, so the arrays are identical.
+    """
+    if not data:
+        return None
+    raw = np.frombuffer(data, np.uint8)
+    space = (raw == 32) | (raw == 9)
+    newline = raw == 10
+    if not np.all(space | newline | ((raw > 32) & (raw < 127))):
+        return None
+    solid = ~(space | newline)
+    starts = np.flatnonzero(solid & np.concatenate([[True], ~solid[:-1]]))  # first byte of every token
+    tokens_per_line = np.bincount(np.cumsum(newline)[starts])
+    if np.any((tokens_per_line != 0) & (tokens_per_line != 4)):
+        return None
+    tokens = data.split()
+    keys = tokens[0::4]
+    kinds = np.fromiter((_OBJ_KEYWORDS.get(k, 2) for k in keys), np.int8, len(keys))
+    if np.any(kinds == 2):
+        return None
+    values = np.asarray(tokens, dtype=object).reshape(-1, 4)[:, 1:]
+    try:
+        V = np.array(list(map(float, values[kinds == 0].ravel())), np.float64).reshape(-1, 3)
+        F = np.array(list(map(int, values[kinds == 1].ravel())), np.int64).reshape(-1, 3)
+    except (ValueError, OverflowError):
+        return None
+    if F.size and F.min() < 1:  # 0 (an error) or relative indices: the line reader handles and names them
+        return None
+    return V, F - 1
+
+
 def _read_obj(path: str) -> tuple[np.ndarray, np.ndarray]:
+    """OBJ vertices and fan-triangulated faces: the plain layout vectorized, anything else line by line."""
+    with open(path, "rb") as fh:
+        plain = _read_plain_obj(fh.read())
+    return plain if plain is not None else _read_obj_lines(path)
+
+
+def _read_obj_lines(path: str) -> tuple[np.ndarray, np.ndarray]:
+    """Any OBJ file, line by line (see the module docstring); MeshError names the line it cannot read."""
     verts: list[list[float]] = []
     faces: list[tuple[int, int, int]] = []
     with open(path, "r", encoding="utf-8", errors="replace") as fh:

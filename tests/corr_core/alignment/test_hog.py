@@ -3,7 +3,10 @@ import math
 import numpy as np
 import pytest
 
-from corr_core.alignment.hog import draw_hog, hog_dollar, hog_features, hog_skimage
+from corr_core.alignment.hog import draw_hog, gradient_histograms, hog_dollar, hog_features, hog_skimage
+from corr_core.alignment.render import render_views
+from corr_core.generate.chairs import canonical_chair
+from corr_core.geometry.mesh_io import normalize_mesh
 
 N_ORIENTS = 9
 
@@ -85,6 +88,78 @@ def test_stack_equals_per_image():
     stacked = hog_features(views)
     single = np.stack([hog_dollar(v).ravel() for v in views])
     np.testing.assert_allclose(stacked, single, atol=1e-6)
+
+
+def chair_views(index=2, n_views=16, size=120):
+    """A generated chair's views as the align.views stage stores them (uint8) and align.hog reads them."""
+    V, F = canonical_chair(0, index)
+    views = render_views(normalize_mesh(V, "area", F)[0], F, n_views=n_views, image_size=size)
+    return np.clip(np.rint(views * 255.0), 0, 255).astype(np.uint8).astype(np.float32) / 255.0
+
+
+def dense_reference_histograms(images, bin_size=8, n_orients=9):
+    """gradient_histograms as first written: the (..., H, W, O) per-pixel histograms of every pixel, then the
+    run-reshape interpolation over rows and columns (einsum + sum over each run of bin_size pixels)."""
+    images = np.asarray(images, dtype=np.float32)
+    rows, cols = images.shape[-2] // bin_size, images.shape[-1] // bin_size
+    gy, gx = np.gradient(images, axis=(-2, -1))
+    magnitude = np.hypot(gx, gy)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cosine = np.where(magnitude > 0, gx / magnitude, np.float32(0.0))
+    cosine = np.where(np.signbit(gy), -cosine, cosine)
+    table_index = np.clip(np.trunc(cosine * np.float32(10000.0)), -10000, 10000)
+    orientation = np.minimum(np.arccos(table_index / np.float32(10000.0)).astype(np.float32),
+                             np.float32(np.pi - 1e-6))
+    magnitude = magnitude[..., : rows * bin_size, : cols * bin_size] / np.float32(bin_size**2)
+    orientation = orientation[..., : rows * bin_size, : cols * bin_size]
+    position = orientation * np.float32(n_orients / np.pi)
+    lower_bin = np.floor(position)
+    upper_weight = (position - lower_bin) * magnitude
+    lower_weight = magnitude - upper_weight
+    lower_bin = lower_bin.astype(np.intp).ravel() % n_orients
+    per_pixel = np.zeros((magnitude.size, n_orients), np.float32)
+    pixel = np.arange(magnitude.size)
+    per_pixel[pixel, lower_bin] = lower_weight.ravel()
+    per_pixel[pixel, (lower_bin + 1) % n_orients] += upper_weight.ravel()
+    per_pixel = per_pixel.reshape(magnitude.shape + (n_orients,))
+
+    def interpolate(values, axis):
+        values = np.moveaxis(values, axis, 0)
+        n_cells, shift = values.shape[0] // bin_size, bin_size // 2
+        padding = [(bin_size - shift, shift)] + [(0, 0)] * (values.ndim - 1)
+        runs = np.pad(values, padding).reshape((n_cells + 1, bin_size) + values.shape[1:])
+        frac = ((shift + np.arange(bin_size) + 0.5) / bin_size - 0.5).astype(values.dtype)
+        upper = np.einsum("r,kr...->k...", frac, runs)
+        return np.moveaxis(upper[:-1] + (runs.sum(axis=1) - upper)[1:], 0, axis)
+
+    hist = interpolate(interpolate(per_pixel, -3), -2)
+    for index in ((..., 0, slice(None), slice(None)), (..., slice(None), 0, slice(None)),
+                  (..., slice(None), -1, slice(None)), (..., -1, slice(None), slice(None))):
+        hist[index] *= 8.0 / 7.0
+    return hist
+
+
+@pytest.mark.parametrize("bin_size, n_orients", [(8, 9), (4, 6), (5, 9), (8, 1)])
+def test_histograms_of_the_gradient_pixels_only_equal_the_dense_computation_bit_for_bit(bin_size, n_orients):
+    rng = np.random.default_rng(bin_size * 10 + n_orients)
+    flat = np.full((40, 48), 0.5, np.float32)
+    edge = flat.copy()
+    edge[:, 23:] = 0.2
+    cases = {"chair views": chair_views(index=4, n_views=4), "random": rng.random((3, 37, 53)).astype(np.float32),
+             "smooth": smooth_test_image(), "flat": flat, "one edge": edge}
+    for name, images in cases.items():
+        got = gradient_histograms(images, bin_size, n_orients)
+        expected = dense_reference_histograms(images, bin_size, n_orients)
+        assert got.dtype == np.float32 and got.shape == expected.shape, name
+        np.testing.assert_array_equal(got, expected, err_msg=name)
+
+
+def test_all_views_in_one_pass_equal_each_view_alone_exactly():
+    views = chair_views()
+    features = hog_features(views)
+    assert features.shape == (16, 8100) and features.dtype == np.float32
+    np.testing.assert_array_equal(features, np.stack([hog_dollar(view).ravel() for view in views]))
+    np.testing.assert_array_equal(features, hog_features(np.concatenate([views, views]))[16:])  # blocks of 16
 
 
 def orientation_energy(features):

@@ -2,8 +2,10 @@ import numpy as np
 import pytest
 
 from corr_core.open3d_loader import load_open3d
-from corr_core.alignment.render import camera_frames, render_views
-from corr_core.geometry.primitives import rotate_about_y, rotation_about_y
+from corr_core.alignment.render import camera_frames, pixels_in_face_boxes, render_views, view_rays
+from corr_core.generate.chairs import canonical_chair
+from corr_core.geometry.mesh_io import normalize_mesh
+from corr_core.geometry.primitives import face_normals, rotate_about_y, rotation_about_y
 
 N_VIEWS = 16
 SIZE = 48
@@ -112,3 +114,50 @@ def test_supersampling_and_input_checks(asymmetric_mesh):
         render_views(V, F[:, :2])
     with pytest.raises(ValueError):
         render_views(V, F + len(V))
+
+
+def render_every_ray(V, F, n_views=16, image_size=120, elevation_deg=20.0, margin=1.05, ambient=0.1, diffuse=0.75):
+    """Reference: every pixel's ray cast (no culling), shaded as the module docstring says."""
+    o3d = load_open3d()
+    V = np.asarray(V, dtype=np.float32)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(V), o3d.core.Tensor(np.asarray(F).astype(np.uint32)))
+    rays = view_rays(n_views, image_size, elevation_deg, margin)
+    face = scene.cast_rays(o3d.core.Tensor(rays))["primitive_ids"].numpy()
+    hit = face != scene.INVALID_ID
+    backs = camera_frames(n_views, elevation_deg)[:, 2].astype(np.float32)
+    shade = ambient + diffuse * np.abs(np.einsum("fi,vi->fv", face_normals(V, F).astype(np.float32), backs))
+    images = np.ones(face.shape, np.float32)
+    images[hit] = shade[face[hit], np.nonzero(hit)[0]]
+    return images, hit
+
+
+def culling_cases(asymmetric_mesh):
+    """(name, V, F): a chair, the boxes and ball, and meshes partly or wholly outside the view window."""
+    chair = canonical_chair(0, 3)
+    chair = (normalize_mesh(chair[0], "area", chair[1])[0], chair[1])
+    V, F = asymmetric_mesh
+    return [("chair", *chair), ("turned chair", rotate_about_y(chair[0], 0.7) * 0.9, chair[1]),
+            ("boxes and ball", V, F), ("partly outside", 1.6 * V + [0.6, -0.3, 0.2], F),
+            ("outside", V + [5.0, 0.0, 0.0], F),
+            ("tiny triangle", V[F[:1]].reshape(3, 3) * 1e-3, np.array([[0, 1, 2]])),
+            ("one triangle", np.array([[-0.7, -0.5, 0.1], [0.6, -0.2, -0.3], [0.1, 0.8, 0.2]]), np.array([[0, 1, 2]]))]
+
+
+def test_rays_cast_only_where_a_face_can_be_hit_give_the_same_views(asymmetric_mesh):
+    for name, V, F in culling_cases(asymmetric_mesh):
+        for kwargs in ({}, {"n_views": 5, "image_size": 48, "elevation_deg": -35.0, "margin": 0.8}):
+            reference, hit = render_every_ray(V, F, **kwargs)
+            np.testing.assert_array_equal(render_views(V, F, **kwargs), reference, err_msg=name)
+            cast = pixels_in_face_boxes(np.asarray(V, np.float32), F, **{"n_views": 16, **kwargs})
+            assert not np.any(hit & ~cast), name  # every pixel whose ray hits is cast
+    V, F = culling_cases(asymmetric_mesh)[0][1:]
+    cast = pixels_in_face_boxes(V, F)
+    assert 0.05 < cast.mean() < 0.4  # a chair: a small part of every view, not the whole window
+
+
+def test_supersampled_culled_views_are_the_box_average_of_every_ray(asymmetric_mesh):
+    V, F = asymmetric_mesh
+    fine, _ = render_every_ray(V, F, n_views=3, image_size=2 * SIZE)
+    expected = fine.reshape(3, SIZE, 2, SIZE, 2).mean(axis=(2, 4))
+    np.testing.assert_array_equal(render_views(V, F, n_views=3, image_size=SIZE, supersample=2), expected)

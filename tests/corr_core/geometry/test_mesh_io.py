@@ -4,7 +4,8 @@ import struct
 import numpy as np
 import pytest
 
-from corr_core.geometry.mesh_io import MeshError, load_mesh, normalize_mesh, save_obj
+from corr_core.geometry.mesh_io import (MeshError, _read_obj_lines, _read_plain_obj, load_mesh, normalize_mesh,
+                                       save_obj)
 
 # five vertices in a deliberately unsorted order: row i of V must be the file's i-th vertex
 V5 = np.array([[3.0, 0.5, -1.0], [0.0, 0.0, 0.0], [1.0, 2.0, 0.25], [-2.0, 1.0, 1.0], [0.5, -1.5, 2.0]])
@@ -96,6 +97,48 @@ def test_many_vertices_in_random_order_roundtrip_exactly(tmp_path):
     V2, F2 = load_mesh(path)
     np.testing.assert_array_equal(V2, V)
     np.testing.assert_array_equal(F2, F)
+
+
+TRIANGLE = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+PLAIN_OBJ = {  # the layout read in vectorized passes
+    "save_obj": None,  # written by save_obj (below)
+    "faces_first": "f 2 3 1\n" + TRIANGLE,
+    "blank_lines_tabs_no_final_newline": "\n" + TRIANGLE.replace("v 1 0 0", " v\t1  0 0\t") + "\n  \nf 1 2 3",
+    "signs_exponents_underscores_nan_inf": ("v +1.5e-3 -0 .5\nv 1_0 2 -3\nv 4 1E2 7\n"
+                                            "v nan inf -inf\nf +1 2 3\nf 3 2 1\n"),  # NaN unused: no error
+    "vertices_only": TRIANGLE,
+}
+OTHER_OBJ = {  # anything else: read line by line
+    "crlf": TRIANGLE.replace("\n", "\r\n") + "f 1 2 3\r\n",
+    "comment": "# made by hand\n" + TRIANGLE + "f 1 2 3\n",
+    "normals": TRIANGLE + "vn 0 0 1\nf 1//1 2//1 3//1\n",
+    "quad": TRIANGLE + "v 1 1 0\nf 1 2 4 3\n",
+    "relative": TRIANGLE + "f -3 -2 -1\n",
+    "fourth_coordinate": "v 0 0 0 1\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    "two_vertices_on_a_line": "v 0 0 0 v 1 0 0\n\nv 0 1 0\nf 1 2 2\n",  # the line reader keeps one
+    "non_ascii_name": TRIANGLE + "o caf\u00e9\nf 1 2 3\n",
+    "form_feed": TRIANGLE.replace("\n", "\x0c\n", 1) + "f 1 2 3\n",
+}
+
+
+@pytest.mark.parametrize("name", sorted(PLAIN_OBJ) + sorted(OTHER_OBJ))
+def test_the_vectorized_obj_reader_reads_exactly_what_the_line_reader_reads(tmp_path, name):
+    path = tmp_path / f"{name}.obj"
+    if name == "save_obj":
+        rng = np.random.default_rng(5)
+        save_obj(path, rng.normal(size=(50, 3)), rng.integers(0, 50, size=(80, 3)))
+    else:
+        path.write_bytes(({**PLAIN_OBJ, **OTHER_OBJ}[name]).encode("utf-8"))
+    plain = _read_plain_obj(path.read_bytes())
+    assert (plain is not None) == (name in PLAIN_OBJ)  # the plain layout is recognized, nothing else is
+    V, F = _read_obj_lines(path)
+    got = load_mesh(path, require_faces=False)
+    for a, b in zip(got, (V, F)):
+        assert a.dtype == b.dtype and a.shape == b.shape
+        np.testing.assert_array_equal(a, b)
+    if plain is not None:
+        np.testing.assert_array_equal(plain[0], V)
+        np.testing.assert_array_equal(plain[1], F)
 
 
 @pytest.mark.parametrize("name, text, message", [
