@@ -120,7 +120,8 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
     (``refine``: steps of ``refine.refine_plan``, joined by "+" or as a list; "extrinsic+spectral+deform" =
     patch-wise rigid ICP, full-resolution ZoomOut, ARAP registration, as ``dense_map``; "+settle" adds ARAP against the surface alone;
     "extrinsic", "spectral", "none", ...). ``n_patches`` ... ``icp_iterations``: ``refine_extrinsic``'s; ``stiffness``:
-    ``refine_deform``'s and ``refine_settle``'s. Several initial hypotheses
+    ``refine_deform``'s and ``refine_settle``'s (the defaults of ``n_patches``, ``patch_size`` and ``stiffness``: swept
+    by ``python bench/dense_constants.py --seeds 10-13``, docs/dense.md "Tuned constants"). Several initial hypotheses
     (``corr.dense_init`` with hypotheses > 1): each is refined and the least distorted result kept
     (``refine.refine_best``). Returns {"vertex_map": (n_template,) int target vertex id (original ids; -1 off the
     template's kept component), "hypothesis": index of the kept initial map (0: the best ranked), "distortions":

@@ -155,7 +155,11 @@ def refine_deform(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, stif
 
     Args:
         source, target: bases; p2p: (n_s,) int current map (local ids).
-        stiffness: length (units sqrt(template area)) below which the data term wins over ARAP.
+        stiffness: length (units sqrt(template area)) below which the data term wins over ARAP. 0.03: swept by
+            `python bench/dense_constants.py --seeds 10-13` (generated other bodies; docs/dense.md "Tuned
+            constants"): 0.02 and softer raise the error on 18 of 20 targets, 0.04 and 0.05 lower it on 14 of 20
+            (mean 0.01271 and 0.01277 against 0.01301 on the right maps), 0.08 raises it; 0.03 stays (the
+            pipelines' measured results use it).
         iterations: rotation / solve steps per round.
         rounds: registrations; each starts from the map the previous one read back (its images become the new
             anchors), so a region the anchors held back moves on; stops early when the map no longer changes.

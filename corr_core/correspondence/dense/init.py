@@ -36,6 +36,11 @@ from corr_core.correspondence.dense.basis import MeshBasis
 from corr_core.geometry.primitives import vertex_adjacency
 
 LOCAL_SCALES = (0.1, 0.2, 0.4)       # widths of exp(-(d/s)^2), units sqrt(area)
+# Weight of the chirality columns of ``point_features`` (the automatic probes' and ``map_from_points``' fits). Chosen
+# by `python bench/dense_constants.py --seeds 10-13` (generated other bodies, 20 targets; docs/dense.md "Tuned
+# constants"): 0 (nothing tells a map from its mirror image) flips 7 of 20 automatic maps; 0.15 / 0.3 / 0.5 give
+# mean errors 0.01266 / 0.01301 / 0.01325 on the right maps, 0.01328 / 0.01355 / 0.01338 from the sparse points: a
+# plateau, 0.3 stays.
 CHIRALITY_WEIGHT = 0.3
 ZOOMOUT_SAMPLES = 2000           # template samples (and target samples or vertices) ZoomOut iterates on
 # Candidates kept: chirality agreement above this fraction of the best's. `python bench/chirality_pool.py --seeds
@@ -337,12 +342,14 @@ def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int | None = N
                          points_source: np.ndarray | None = None,
                          points_target: np.ndarray | None = None, *, keep: int = 4, k_init: int = 40,
                          k_probe: int = 60, k_end: int = 100, step: int = 2, n_probe: int = 1000,
-                         orientation_neighbours: int = 64, return_info: bool = False):
+                         orientation_neighbours: int = 64, chirality_weight: float = CHIRALITY_WEIGHT,
+                         return_info: bool = False):
     """The best ranked automatic maps (``rank_candidates``: ``map_automatic``'s choice first, then the next in the
     same order), each taken on to ``k_end``: ``n`` of them, or when ``n`` is None as many as
     ``hypotheses_to_refine`` decides (the best two, more when they are close). The true map and the 180-degree
     turn of a body whose front and back look alike both come out, and ``refine.refine_best`` keeps the one that
-    refines to the less distorted map. Arguments as ``map_automatic``.
+    refines to the less distorted map. Arguments as ``map_automatic``; ``chirality_weight``: ``point_features``'
+    (the probes' chirality columns; a benchmark sweeps it, ``bench/dense_constants.py``).
 
     Returns: [(C, p2p_samples)] (at most n, best ranked first); with ``return_info`` also ``map_automatic``'s dict.
     """
@@ -362,8 +369,8 @@ def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int | None = N
     for s, t, cost in candidates:
         # the target's distance fields in the template's units (same mean distance between the assigned points)
         ratio = Ds[np.ix_(s, s)].sum() / max(Dt[np.ix_(t, t)].sum(), 1e-300)
-        FS = point_features(source, Ps[s], distances=Gs[s])
-        FT = point_features(target, Pt[t], distances=ratio * Gt[t])
+        FS = point_features(source, Ps[s], distances=Gs[s], chirality_weight=chirality_weight)
+        FT = point_features(target, Pt[t], distances=ratio * Gt[t], chirality_weight=chirality_weight)
         n_pairs = len(s) * (len(s) - 1) // 2                     # the last columns: the chirality functions
         C, p2p = map_from_points(source, target, source.vids[Ps[s]], target.vids[Pt[t]], k_init=k_init,
                                  k_end=min(k_probe, k_end), step=5, features=(FS, FT), n_zoomout=n_probe,

@@ -204,6 +204,19 @@ def test_two_hypotheses_give_a_good_automatic_map_and_rank_the_turn_second(body)
         automatic_hypotheses(body["S"], body["T"], 0)
 
 
+def test_the_chirality_weight_reaches_the_probes(body):
+    """``automatic_hypotheses(chirality_weight=0)`` (bench/dense_constants.py sweeps it) fits the probes without
+    chirality columns, so no candidate has a chirality agreement; at the default every candidate has one."""
+    from corr_core.correspondence.dense import automatic_hypotheses
+
+    def agreements(**kw):
+        _, info = automatic_hypotheses(body["S"], body["T"], 1, k_init=K_INIT, k_end=K, return_info=True, **kw)
+        return np.array([c["chirality"] for c in info["candidates"]])
+
+    assert np.all(agreements(chirality_weight=0.0) == 0.0)
+    assert np.all(np.abs(agreements()) > 0.05)
+
+
 def test_hypotheses_to_refine_takes_the_best_two_and_any_close_pool_candidate():
     from corr_core.correspondence.dense.init import HYPOTHESIS_WKS_RATIO, hypotheses_to_refine
 
