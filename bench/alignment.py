@@ -112,7 +112,7 @@ def bench_mrf(N=100, V=16, repeat=3):
     X = rng.random((N, V))
     t_c, _ = best_time(lambda: [circ.matvec(X) for _ in range(20)], repeat)
     t_d, _ = best_time(lambda: [dense.matvec(X) for _ in range(20)], repeat)
-    U = uniform_unary(N, V, 0)
+    U = uniform_unary(N, V, seed=0)
     t_lh, res = best_time(lambda: solve_lh(circ, U, compute_bound=False), repeat)
     t_lhd, _ = best_time(lambda: solve_lh(dense, U, compute_bound=False), repeat)
     t_b, _ = best_time(lambda: solve_lh(circ, U), 1)

@@ -336,7 +336,7 @@ def _child_mrf(path: str, solver: str, knn: int) -> dict:
     op = CirculantPairwise(C, sigma, neighbors)
     t_op = time.time() - t0
     t0 = time.time()
-    unary = solvers.uniform_unary(n, V, 0)
+    unary = solvers.uniform_unary(n, V, seed=0)
     if solver == "spectral":
         labels = sync.spectral_sync_operator(op)
     else:
@@ -399,9 +399,9 @@ def descriptor_quality(n: int, work: Path, k: int = 10) -> list[dict]:
     best = np.concatenate([pair_costs(F[a:a + 100], F) for a in range(0, n, 100)]).min(axis=2).astype(np.float64)
     np.fill_diagonal(best, np.inf)
     true_nn = np.argsort(best, axis=1)[:, :k]
-    variants = {"full DFT magnitudes": candidates.rotation_invariant_descriptor(F, 0)}
+    variants = {"full DFT magnitudes": candidates.rotation_invariant_descriptor(F, dim=0)}
     for dim in (16, 32, 64, 128, 256):
-        variants[f"projected to {dim}"] = candidates.rotation_invariant_descriptor(F, dim)
+        variants[f"projected to {dim}"] = candidates.rotation_invariant_descriptor(F, dim=dim)
     variants["128, then 32 principal components"] = candidates.principal_components(variants["projected to 128"])
     rows = [{"descriptor": "true nearest", "recall": 1.0, "median_cost": float(np.median(np.take_along_axis(best, true_nn, 1)))},
             {"descriptor": "all pairs", "recall": float("nan"), "median_cost": float(np.median(best[np.isfinite(best)]))}]

@@ -104,7 +104,7 @@ def descriptor(features, *, dim: int = candidates.DESCRIPTOR_DIM, seed: int = 0)
     rotation-invariant descriptor (``candidates.rotation_invariant_descriptor``), "self_costs": (V,) float32
     C_ii(theta) (the shape's rotational symmetry)}."""
     F = np.asarray(features)
-    return {"descriptor": candidates.rotation_invariant_descriptor(F, dim, seed),
+    return {"descriptor": candidates.rotation_invariant_descriptor(F, dim=dim, seed=seed),
             "self_costs": compute_pair_costs(F[None])[0, 0]}
 
 

@@ -31,7 +31,7 @@ def circular_distance(a: np.ndarray, b: np.ndarray, V: int) -> np.ndarray:
 
 
 def agreement_up_to_offset(labels_a: np.ndarray, labels_b: np.ndarray, V: int,
-                           tolerance: int = 0) -> tuple[float, int]:
+                           *, tolerance: int = 0) -> tuple[float, int]:
     """(fraction, best_offset): the largest fraction of items i with circular distance
     |labels_a[i] - (labels_b[i] + offset)| <= tolerance steps, over global offsets 0..V-1, and that offset
     (smallest one among ties). So labels_a ~= (labels_b + best_offset) % V.
@@ -54,7 +54,7 @@ def relabel_by_offset(labels: np.ndarray, offset: int, V: int) -> np.ndarray:
     return (np.asarray(labels, dtype=np.int64) + int(offset)) % V
 
 
-def aligned_view_index(label: int, V: int, k: int = 0) -> int:
+def aligned_view_index(label: int, V: int, *, k: int = 0) -> int:
     """Index of the original view that is view ``k`` of the common frame for a shape with label ``label``."""
     return int((k + label) % V)
 

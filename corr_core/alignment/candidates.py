@@ -40,7 +40,7 @@ SAMPLE_KINDS = (PAIR_KINDS["random"], PAIR_KINDS["complete"])
 
 
 @functools.lru_cache(maxsize=4)
-def projection_matrix(n_in: int, dim: int, seed: int = 0) -> np.ndarray:
+def projection_matrix(n_in: int, dim: int, *, seed: int = 0) -> np.ndarray:
     """(n_in, dim) float32 Gaussian matrix / sqrt(dim) from ``seed`` (cached per process; the same everywhere)."""
     rng = np.random.default_rng(seed)
     P = rng.standard_normal((n_in, dim), dtype=np.float32) / np.float32(np.sqrt(dim))
@@ -60,7 +60,7 @@ def _dft_magnitudes(F: np.ndarray) -> np.ndarray:
     return (mag * np.sqrt(w / V)[:, None]).astype(np.float32)
 
 
-def rotation_invariant_descriptor(F: np.ndarray, dim: int = DESCRIPTOR_DIM, seed: int = 0) -> np.ndarray:
+def rotation_invariant_descriptor(F: np.ndarray, *, dim: int = DESCRIPTOR_DIM, seed: int = 0) -> np.ndarray:
     """(dim,) float32 descriptor of one shape's view features F: (V, D) (or (n, V, D) -> (n, dim)), invariant
     under cyclic shifts of the views (see the module docstring); dim = 0 keeps the full (V//2+1) * D magnitudes.
     """
@@ -71,7 +71,7 @@ def rotation_invariant_descriptor(F: np.ndarray, dim: int = DESCRIPTOR_DIM, seed
     flat = M.reshape(M.shape[:-2] + (-1,))
     if not dim:
         return flat
-    return flat @ projection_matrix(flat.shape[-1], int(dim), int(seed))
+    return flat @ projection_matrix(flat.shape[-1], int(dim), seed=int(seed))
 
 
 def _check_descriptors(X: np.ndarray) -> np.ndarray:
@@ -84,7 +84,7 @@ def _check_descriptors(X: np.ndarray) -> np.ndarray:
     return X
 
 
-def principal_components(X: np.ndarray, dim: int = INDEX_DIM) -> np.ndarray:
+def principal_components(X: np.ndarray, *, dim: int = INDEX_DIM) -> np.ndarray:
     """(N, min(dim, d)) float32: the rows of X (N, d) centred and projected on their ``dim`` leading principal
     axes (eigenvectors of the d x d covariance, float64; each axis signed so that its largest entry is positive).
     X itself when d <= dim. Distances in the result approximate those of X (the dropped variance is small)."""
@@ -133,7 +133,7 @@ def nearest_pairs(X: np.ndarray, k: int) -> np.ndarray:
     return np.stack([rows[keep], idx[keep]], axis=1)
 
 
-def random_pairs(N: int, per_shape: int, seed: int = 0) -> np.ndarray:
+def random_pairs(N: int, per_shape: int, *, seed: int = 0) -> np.ndarray:
     """(N per_shape, 2) int64 pairs (i, j != i), j uniform over the other shapes, from ``seed``."""
     if N < 2 or per_shape <= 0:
         return np.zeros((0, 2), np.int64)
@@ -160,7 +160,7 @@ def bridge_pairs(N: int, pairs: np.ndarray) -> np.ndarray:
     return np.stack([first[:-1], first[1:]], axis=1)
 
 
-def candidate_pairs(X: np.ndarray, k: int = 10, n_random: int = 2, seed: int = 0, self_pairs: bool = True,
+def candidate_pairs(X: np.ndarray, *, k: int = 10, n_random: int = 2, seed: int = 0, self_pairs: bool = True,
                     index_dim: int = INDEX_DIM) -> tuple[np.ndarray, np.ndarray]:
     """The candidate graph of N shapes with descriptors X: (N, d).
 
@@ -173,8 +173,8 @@ def candidate_pairs(X: np.ndarray, k: int = 10, n_random: int = 2, seed: int = 0
     """
     X = _check_descriptors(X)
     N = len(X)
-    found = [(nearest_pairs(principal_components(X, index_dim), k), PAIR_KINDS["nearest"]),
-             (random_pairs(N, n_random, seed), PAIR_KINDS["random"])]
+    found = [(nearest_pairs(principal_components(X, dim=index_dim), k), PAIR_KINDS["nearest"]),
+             (random_pairs(N, n_random, seed=seed), PAIR_KINDS["random"])]
     off = np.concatenate([p for p, _ in found])
     found.append((bridge_pairs(N, off), PAIR_KINDS["bridge"]))
     if self_pairs:

@@ -44,7 +44,7 @@ def _check_costs(C: np.ndarray, sigma: float) -> np.ndarray:
     return C
 
 
-def _rows_per_block(N: int, V: int, budget_bytes: int = 32 << 20) -> int:
+def _rows_per_block(N: int, V: int, *, budget_bytes: int = 32 << 20) -> int:
     """Rows of an (N, V) float64 slab per block so that one block's temporaries stay near ``budget_bytes``."""
     return max(1, budget_bytes // (8 * N * V))
 
@@ -226,7 +226,7 @@ class CirculantPairwise:
         B[np.repeat(np.arange(self.n_nodes), np.diff(self.indptr)), self.indices] = self.K_edges.max(axis=1)
         return B
 
-    def harmonic(self, h: int = 1):
+    def harmonic(self, *, h: int = 1):
         """H: (N, N) complex128 Hermitian, H_ij = sum_t K_ij(t) exp(+i 2 pi h t / V): a dense ndarray, or a
         scipy.sparse CSR matrix for a sparse operator (the input of spectral synchronization)."""
         V = self.n_labels

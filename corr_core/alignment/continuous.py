@@ -27,7 +27,7 @@ def _spectrum(C: np.ndarray) -> np.ndarray:
     return c
 
 
-def _evaluate(c: np.ndarray, phi: np.ndarray, V: int, derivative: int = 0) -> np.ndarray:
+def _evaluate(c: np.ndarray, phi: np.ndarray, V: int, *, derivative: int = 0) -> np.ndarray:
     """Band-limited values (or their ``derivative``-th derivative in phi) of spectra c (..., K) at phi (..., m):
     Re sum_k c_k (i w_k)^derivative exp(i w_k phi), w_k = 2 pi k / V (the Nyquist coefficient is real, so its
     term is c cos(pi phi), the symmetric choice)."""
@@ -64,7 +64,7 @@ def _slopes(c: np.ndarray, phi: np.ndarray, V: int) -> tuple[np.ndarray, np.ndar
     return np.real(cz @ w), np.real(cz @ (w * w))
 
 
-def continuous_argmin(C: np.ndarray, samples_per_step: int = 8, newton_steps: int = 3) -> np.ndarray:
+def continuous_argmin(C: np.ndarray, *, samples_per_step: int = 8, newton_steps: int = 3) -> np.ndarray:
     """(...,) float steps in [0, V): the minimiser of the band-limited interpolation of C (..., V): the smallest
     value on a grid of ``samples_per_step`` points per step (``_fine_grid``), then Newton steps kept within half
     a grid cell. Ties go to the first grid point, so the result is deterministic."""
@@ -112,7 +112,7 @@ def _pair_weights(x: np.ndarray, iu: np.ndarray, ju: np.ndarray, d: np.ndarray, 
 
 
 def refine_labels_graph(N: int, rows: np.ndarray, cols: np.ndarray, costs: np.ndarray, labels: np.ndarray,
-                        sigma: float, periods: np.ndarray | None = None, tolerance: float = 1.0,
+                        sigma: float, periods: np.ndarray | None = None, *, tolerance: float = 1.0,
                         chunk: int = 16384) -> np.ndarray:
     """``refine_labels`` on a candidate graph: the pairs (rows[p], cols[p]) (P,), rows < cols, with costs
     (P, V) instead of all pairs of a dense C. The weighted graph Laplacian is sparse and the system is solved
@@ -153,7 +153,7 @@ def refine_labels_graph(N: int, rows: np.ndarray, cols: np.ndarray, costs: np.nd
 
 
 def refine_labels(C: np.ndarray, labels: np.ndarray, sigma: float, periods: np.ndarray | None = None,
-                  tolerance: float = 1.0, chunk: int = 16384) -> np.ndarray:
+                  *, tolerance: float = 1.0, chunk: int = 16384) -> np.ndarray:
     """Continuous labels t: (N,) float steps, near the discrete ``labels`` (N,) int, from pair costs C (N, N, V).
 
     Pair (i, j), i < j: d_ij = continuous_argmin C_ij, weight exp(-min C_ij / sigma); the pair counts only when

@@ -146,9 +146,9 @@ class GraphCosts:
         costs = np.concatenate([self.costs[as_row], self.costs[as_col][:, (-np.arange(V)) % V]])
         return nbrs, costs
 
-    def harmonic(self, sigma: float, h: int = 1):
+    def harmonic(self, sigma: float, *, h: int = 1):
         """H: (N, N) scipy.sparse CSR complex Hermitian, H_ij = sum_t K_ij(t) exp(+i 2 pi h t / V)."""
-        return self.operator(sigma).harmonic(h)
+        return self.operator(sigma).harmonic(h=h)
 
     def subgraph(self, nodes: np.ndarray) -> "GraphCosts":
         """The graph costs of the shapes ``nodes`` (sorted (m,) int) among themselves, renumbered 0..m-1."""

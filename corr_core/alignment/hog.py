@@ -141,7 +141,7 @@ def _binned_rows(gx: np.ndarray, gy: np.ndarray, magnitude: np.ndarray, bin_size
     return np.moveaxis(cells.reshape(cells.shape[:1] + lead + cells.shape[2:]), 0, -3)
 
 
-def gradient_histograms(images: np.ndarray, bin_size: int = 8, n_orients: int = 9) -> np.ndarray:
+def gradient_histograms(images: np.ndarray, *, bin_size: int = 8, n_orients: int = 9) -> np.ndarray:
     """Soft-binned, unnormalized orientation histograms (toolbox gradientHist, softBin=1).
 
     Args:
@@ -167,7 +167,7 @@ def gradient_histograms(images: np.ndarray, bin_size: int = 8, n_orients: int = 
     return np.ascontiguousarray(hist, dtype=np.float32)
 
 
-def normalize_cells(hist: np.ndarray, bin_size: int = 8, clip: float = 0.2) -> np.ndarray:
+def normalize_cells(hist: np.ndarray, *, bin_size: int = 8, clip: float = 0.2) -> np.ndarray:
     """Four 2x2-block normalizations per cell, clipped (toolbox hogNormMatrix + hogChannels type 0).
 
     Args:
@@ -193,7 +193,7 @@ def normalize_cells(hist: np.ndarray, bin_size: int = 8, clip: float = 0.2) -> n
     return out.reshape(hist.shape[:-1] + (-1,))
 
 
-def hog_dollar(image: np.ndarray, bin_size: int = 8, n_orients: int = 9, clip: float = 0.2) -> np.ndarray:
+def hog_dollar(image: np.ndarray, *, bin_size: int = 8, n_orients: int = 9, clip: float = 0.2) -> np.ndarray:
     """HOG as Dollár's toolbox ``hog(I, binSize, nOrients, clip)`` (see module docstring).
 
     Args:
@@ -205,8 +205,8 @@ def hog_dollar(image: np.ndarray, bin_size: int = 8, n_orients: int = 9, clip: f
     Returns:
         (..., H // bin_size, W // bin_size, 4 * n_orients) float32; 120x120 -> (15, 15, 36) = 8100.
     """
-    hist = gradient_histograms(image, bin_size, n_orients)
-    return normalize_cells(hist, bin_size, clip)
+    hist = gradient_histograms(image, bin_size=bin_size, n_orients=n_orients)
+    return normalize_cells(hist, bin_size=bin_size, clip=clip)
 
 
 def hog_skimage(image: np.ndarray, **kwargs) -> np.ndarray:
@@ -246,7 +246,7 @@ def hog_features(views: np.ndarray, method: str = "dollar", **kwargs) -> np.ndar
     raise ValueError(f"method must be 'dollar' or 'skimage', got {method!r}")
 
 
-def draw_hog(hog_cells: np.ndarray, cell_px: int = 16) -> np.ndarray:
+def draw_hog(hog_cells: np.ndarray, *, cell_px: int = 16) -> np.ndarray:
     """Glyph picture of HOG cells: one bar per orientation, brightness = that orientation's energy.
 
     Bars are drawn perpendicular to the gradient direction (i.e. along the edge), like the toolbox's

@@ -84,7 +84,7 @@ def upper_bound(op: CirculantPairwise, unary: np.ndarray) -> float:
 
 
 def solver_quality(C: np.ndarray, solution: dict, peer_labels: dict, restarts: int, seed: int,
-                   op: CirculantPairwise | None = None, icm_starts: int = 5) -> dict:
+                   op: CirculantPairwise | None = None, *, icm_starts: int = 5) -> dict:
     """Energies on the complete graph (a candidate graph: on that graph) with the solution's unary terms: the
     answer, ICM from ``icm_starts`` random starts (mean; None for 0), the best of ``restarts`` random restarts
     (None for 0), each peer solver's labeling (peer_labels {solver: (N,) int}), a random labeling, and an
@@ -93,7 +93,7 @@ def solver_quality(C: np.ndarray, solution: dict, peer_labels: dict, restarts: i
     if op is None:
         op = C.operator(float(solution["sigma"])) if isinstance(C, GraphCosts) else \
             CirculantPairwise(C, float(solution["sigma"]))
-    unary = uniform_unary(N, V, int(solution["seed"]))
+    unary = uniform_unary(N, V, seed=int(solution["seed"]))
     rng = np.random.default_rng(seed)
     energy = lambda lab: float(mrf.energy(op, unary, lab))  # noqa: E731
     icm = [energy(mrf.icm(op, unary, mrf.random_labels(N, V, rng))) for _ in range(icm_starts)]
@@ -113,7 +113,7 @@ def _periodic_distance(x: np.ndarray, period: np.ndarray) -> np.ndarray:
     return np.where(period > 0, np.abs((x + 0.5 * p) % p - 0.5 * p), 0.0)
 
 
-def agreement_modulo(a: np.ndarray, b: np.ndarray, V: int, periods: np.ndarray, tolerance: int = 0) -> float:
+def agreement_modulo(a: np.ndarray, b: np.ndarray, V: int, periods: np.ndarray, *, tolerance: int = 0) -> float:
     """Fraction of items with labels a == b + offset modulo their period (periods (n,) float steps: V for an
     asymmetric shape, V/k for a k-fold symmetric one, 0 = any label fits), best over global offsets 0..V-1."""
     d = np.asarray(a, np.float64)[None, :] - np.asarray(b, np.float64)[None, :] - np.arange(V)[:, None]
@@ -122,7 +122,7 @@ def agreement_modulo(a: np.ndarray, b: np.ndarray, V: int, periods: np.ndarray, 
 
 
 def continuous_error(angles_deg: np.ndarray, truth_deg: np.ndarray, orders: np.ndarray | None = None,
-                     resolution_deg: float = 0.01) -> dict:
+                     *, resolution_deg: float = 0.01) -> dict:
     """Error in degrees of continuous azimuths (n,) against true ones (n,), up to one global offset (the one
     minimising the mean error, on a grid of ``resolution_deg``), each modulo 360/k for a shape of symmetry
     order k (orders (n,) int; 0 = fully symmetric: left out). {"mean_error_deg", "max_error_deg",
@@ -170,7 +170,7 @@ def ground_truth_agreement(names: list[str], labels: np.ndarray, truth: dict[str
     else:
         periods = np.where(k > 0, V / np.maximum(k, 1), 0.0)
         out = {"exact": agreement_modulo(labels[common], steps, V, periods),
-               "within_one_view": agreement_modulo(labels[common], steps, V, periods, 1), "n": len(common),
+               "within_one_view": agreement_modulo(labels[common], steps, V, periods, tolerance=1), "n": len(common),
                "modulo_symmetry": True}
         for p, lab in (peer_labels or {}).items():
             out[f"exact_{p}"] = agreement_modulo(lab[common], steps, V, periods)
@@ -209,7 +209,7 @@ def _continuous_fields(names: list[str], solution: dict) -> dict:
 
 
 def evaluate_alignment(C: np.ndarray, solution: dict, truth: dict[str, int] | None = None,
-                       other: dict | None = None, seeds: list = (0, 1, 2, 3, 4), shift_seed: int = 123,
+                       other: dict | None = None, seeds: list = (0, 1, 2, 3, 4), *, shift_seed: int = 123,
                        restarts: int = 20, compare_solvers: bool = True,
                        truth_deg: dict[str, float] | None = None, truth_orders: dict[str, int] | None = None,
                        icm_starts: int = 5) -> dict:
@@ -257,7 +257,7 @@ def evaluate_alignment(C: np.ndarray, solution: dict, truth: dict[str, int] | No
                  solve_labels(C, p, sigma, int(solution["seed"]), op=full_op)["labels"] for p in SOLVERS}
         m["agreement_with"] = {p: float(azimuth.agreement_up_to_offset(lab, labels, V)[0])
                                for p, lab in peers.items() if p != solution["solver"]}
-    m["solver_quality"] = solver_quality(C, solution, peers, restarts, shift_seed, full_op, icm_starts)
+    m["solver_quality"] = solver_quality(C, solution, peers, restarts, shift_seed, full_op, icm_starts=icm_starts)
     if truth:
         detected = solution.get("symmetry_order")
         orders = (np.array([truth_orders.get(n, 1) for n in names]) if truth_orders else

@@ -80,7 +80,7 @@ def pair_costs(FA: np.ndarray, FB: np.ndarray | None = None) -> np.ndarray:
 DENSE_BLOCK_FRACTION = 0.25
 
 
-def pair_costs_listed(FA: np.ndarray, FB: np.ndarray, pairs: np.ndarray, chunk: int = 128) -> np.ndarray:
+def pair_costs_listed(FA: np.ndarray, FB: np.ndarray, pairs: np.ndarray, *, chunk: int = 128) -> np.ndarray:
     """C: (p, V) float32, C[k, theta] = sum_v ||FA[i, v] - FB[j, (v+theta)%V]||^2 for the listed pairs
     (i, j) = pairs[k] (p, 2) int (row of FA, row of FB): the values of ``pair_costs(FA, FB)[i, j]`` without the
     other a*b - p pairs (same Fourier-domain formula, per pair: 8 (V//2+1) D flops each, gathered ``chunk``
@@ -122,7 +122,7 @@ def _real_dft(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return out[:K], out[K:]
 
 
-def _real_dft_blocks(F: np.ndarray, rows: int = 64) -> tuple[np.ndarray, np.ndarray]:
+def _real_dft_blocks(F: np.ndarray, *, rows: int = 64) -> tuple[np.ndarray, np.ndarray]:
     """``_real_dft`` computed ``rows`` shapes at a time into the two (V//2+1, n, D) float32 outputs, so that no
     transposed copy of the whole stack F: (n, V, D) is made (a pair task's stacks are hundreds of MB)."""
     n, V, D = F.shape

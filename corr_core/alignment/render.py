@@ -33,7 +33,7 @@ from corr_core.open3d_loader import load_open3d
 from corr_core.geometry.primitives import face_normals, rotation_about_y
 
 
-def camera_frames(n_views: int = 16, elevation_deg: float = 20.0) -> np.ndarray:
+def camera_frames(*, n_views: int = 16, elevation_deg: float = 20.0) -> np.ndarray:
     """Orthonormal camera frames of the view circle.
 
     Args:
@@ -53,7 +53,7 @@ def camera_frames(n_views: int = 16, elevation_deg: float = 20.0) -> np.ndarray:
 
 
 def view_rays(
-    n_views: int = 16, image_size: int = 120, elevation_deg: float = 20.0, margin: float = 1.05
+    *, n_views: int = 16, image_size: int = 120, elevation_deg: float = 20.0, margin: float = 1.05
 ) -> np.ndarray:
     """Orthographic rays of every pixel of every view.
 
@@ -65,7 +65,7 @@ def view_rays(
         (n_views, image_size, image_size, 6) float32 rays [origin, unit direction]; row 0 is the top
         of the image; origins lie 3 units from the origin, outside the unit sphere.
     """
-    frames = camera_frames(n_views, elevation_deg)
+    frames = camera_frames(n_views=n_views, elevation_deg=elevation_deg)
     centres = (np.arange(image_size) + 0.5) / image_size * 2.0 - 1.0
     u = centres * margin  # image x (columns, left -> right)
     v = -centres * margin  # image y (rows, top -> bottom), so world-up is image-up
@@ -83,13 +83,13 @@ def view_rays(
 def _cached_view_rays(n_views: int, image_size: int, elevation_deg: float, margin: float) -> np.ndarray:
     """``view_rays`` flattened to (n_views * size * size, 6), cached (read-only): the rays only depend on the
     camera parameters."""
-    rays = view_rays(n_views, image_size, elevation_deg, margin).reshape(-1, 6)
+    rays = view_rays(n_views=n_views, image_size=image_size, elevation_deg=elevation_deg, margin=margin).reshape(-1, 6)
     rays.setflags(write=False)
     return rays
 
 
 def pixels_in_face_boxes(
-    V: np.ndarray, F: np.ndarray, n_views: int = 16, image_size: int = 120, elevation_deg: float = 20.0,
+    V: np.ndarray, F: np.ndarray, *, n_views: int = 16, image_size: int = 120, elevation_deg: float = 20.0,
     margin: float = 1.05,
 ) -> np.ndarray:
     """Pixels whose ray can hit a face: those inside the image-plane bounding box of some face, per view.
@@ -105,7 +105,7 @@ def pixels_in_face_boxes(
     Returns:
         (n_views, image_size, image_size) bool, True where a ray must be cast.
     """
-    frames = camera_frames(n_views, elevation_deg)
+    frames = camera_frames(n_views=n_views, elevation_deg=elevation_deg)
     F = np.asarray(F)
     u = np.asarray(V, dtype=np.float64) @ frames[:, :2].reshape(-1, 3).T  # (n, 2 k): image x, y per view
     a, b, c = u[F[:, 0]].T, u[F[:, 1]].T, u[F[:, 2]].T  # (2 k, m): the three corners of every face
@@ -138,7 +138,7 @@ def pixels_in_face_boxes(
 def render_views(
     V: np.ndarray,
     F: np.ndarray,
-    n_views: int = 16,
+    *, n_views: int = 16,
     image_size: int = 120,
     elevation_deg: float = 20.0,
     margin: float = 1.05,
@@ -180,7 +180,8 @@ def render_views(
     rays = _cached_view_rays(n_views, size, float(elevation_deg), float(margin))
     # one cast for all views, of the rays that can hit a face only (every other ray misses): the same rays,
     # so the same hits as casting them all, at a fraction of the cost (a chair covers ~1/6 of a view)
-    cast = np.flatnonzero(pixels_in_face_boxes(V, F, n_views, size, elevation_deg, margin))
+    cast = np.flatnonzero(pixels_in_face_boxes(V, F, n_views=n_views, image_size=size, elevation_deg=elevation_deg,
+                                               margin=margin))
     images = np.ones((n_views, size, size), np.float32)
     if len(cast) == 0:
         return _downsample(images, image_size, supersample)
@@ -190,7 +191,7 @@ def render_views(
     view_of_hit = pixel // (size * size)
 
     # the headlight direction is constant per view: |n . d| for every (face, view) pair at once
-    backs = camera_frames(n_views, elevation_deg)[:, 2].astype(np.float32)  # -d per view
+    backs = camera_frames(n_views=n_views, elevation_deg=elevation_deg)[:, 2].astype(np.float32)  # -d per view
     cosine = np.abs(np.einsum("fi,vi->fv", face_normals(V, F).astype(np.float32), backs))  # (m, n_views)
     shade = ambient + diffuse * cosine
     images.reshape(-1)[pixel] = shade[face[hit], view_of_hit]

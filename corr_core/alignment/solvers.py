@@ -33,12 +33,12 @@ __all__ = ["SOLVERS", "uniform_unary", "choose_sigma", "knn_neighbors", "solve_l
 SOLVERS = ("lh", "spectral", "ppm")
 
 
-def uniform_unary(n: int, V: int, seed: int | None = 0) -> np.ndarray:
+def uniform_unary(n: int, V: int, *, seed: int | None = 0) -> np.ndarray:
     """(n, V) i.i.d. uniform [0, 1) unary terms (they break the global-rotation tie of the pairwise term)."""
     return np.random.default_rng(seed).uniform(0.0, 1.0, size=(n, V))
 
 
-def choose_sigma(C: np.ndarray, sigma: float | str | None = "auto", sigma_scale: float = 1.0) -> float:
+def choose_sigma(C: np.ndarray, sigma: float | str | None = "auto", *, sigma_scale: float = 1.0) -> float:
     """Kernel width: ``auto_sigma(C)`` (median over pairs of min_theta C_ij; ``GraphCosts.auto_sigma`` on a
     candidate graph) for sigma None/"auto", else float(sigma); times sigma_scale. Units of C."""
     if sigma in (None, "auto"):
@@ -54,7 +54,7 @@ def knn_neighbors(C: np.ndarray, knn: int) -> np.ndarray | None:
     return nearest_shapes(C, knn) if knn and knn < len(C) - 1 else None
 
 
-def solve_labels(C: np.ndarray, solver: str, sigma: float, seed: int, knn: int = 0,
+def solve_labels(C: np.ndarray, solver: str, sigma: float, seed: int, *, knn: int = 0,
                  op: CirculantPairwise | None = None) -> dict:
     """Labels (N,) for pair costs C (N,N,V) with the chosen solver, plus energy diagnostics.
 
@@ -71,7 +71,7 @@ def solve_labels(C: np.ndarray, solver: str, sigma: float, seed: int, knn: int =
         neighbors = knn_neighbors(C, knn)
         if op is None:
             op = CirculantPairwise(C, sigma, neighbors)
-    unary = uniform_unary(N, V, seed)
+    unary = uniform_unary(N, V, seed=seed)
     out: dict = {}
     if solver == "lh":
         res = mrf.solve_lh(op, unary, compute_bound=False)
@@ -109,15 +109,15 @@ def solve_labels_with_symmetry(C: np.ndarray, solver: str, sigma: float, seed: i
     when no shape is symmetric (orders None or all 1; op: its operator, if built), else
     ``symmetry.place_symmetric`` around the same solver."""
     if orders is None or np.all(np.asarray(orders) == 1):
-        return solve_labels(C, solver, sigma, seed, knn, op)["labels"]
+        return solve_labels(C, solver, sigma, seed, knn=knn, op=op)["labels"]
     if isinstance(C, GraphCosts):
         return symmetry.place_symmetric_graph(C, np.asarray(orders),
                                               lambda g: solve_labels(g, solver, sigma, seed)["labels"], sigma)
     return symmetry.place_symmetric(C, np.asarray(orders),
-                                    lambda Cw: solve_labels(Cw, solver, sigma, seed, knn)["labels"], sigma)
+                                    lambda Cw: solve_labels(Cw, solver, sigma, seed, knn=knn)["labels"], sigma)
 
 
-def solve_alignment(C: np.ndarray, solver: str = "lh", sigma: float | str = "auto", sigma_scale: float = 1.0,
+def solve_alignment(C: np.ndarray, solver: str = "lh", sigma: float | str = "auto", *, sigma_scale: float = 1.0,
                     seed: int = 0, knn: int = 0, symmetric: bool = True) -> dict:
     """Joint alignment of N shapes from pair costs C: (N, N, V) (float32 is kept: no float64 copy).
 
@@ -138,15 +138,15 @@ def solve_alignment(C: np.ndarray, solver: str = "lh", sigma: float | str = "aut
     C = np.asarray(C)
     if not np.all(np.isfinite(C.min(axis=2))):  # min propagates NaN/inf; avoids an (N, N, V) bool temporary
         raise ValueError("pair costs contain NaN: a shape's features are broken")
-    s = choose_sigma(C, sigma, sigma_scale)
+    s = choose_sigma(C, sigma, sigma_scale=sigma_scale)
     N, _, V = C.shape
     orders = symmetry.symmetry_orders(C) if symmetric else np.ones(N, np.int64)  # scale: auto_sigma(C)
     if np.any(orders != 1):
         labels = solve_labels_with_symmetry(C, solver, s, seed, knn, orders)
         op = CirculantPairwise(C, s, knn_neighbors(C, knn))
-        out = {"labels": labels, "energy": float(mrf.energy(op, uniform_unary(N, V, seed), labels))}
+        out = {"labels": labels, "energy": float(mrf.energy(op, uniform_unary(N, V, seed=seed), labels))}
     else:
-        out = solve_labels(C, solver, s, seed, knn)
+        out = solve_labels(C, solver, s, seed, knn=knn)
     t = continuous.refine_labels(C, out["labels"], s, symmetry.symmetry_periods(orders, V))
     out.update(sigma=s, solver=solver, seed=seed, n_views=int(V), knn=int(knn),
                symmetry_order=orders, angles_deg=continuous.steps_to_degrees(t, V))
@@ -161,14 +161,14 @@ def _solve_alignment_graph(gc: GraphCosts, solver: str, sigma, sigma_scale: floa
     _check_graph_knn(knn)
     if not np.all(np.isfinite(gc.best())):
         raise ValueError("pair costs contain NaN: a shape's features are broken")
-    s = choose_sigma(gc, sigma, sigma_scale)
+    s = choose_sigma(gc, sigma, sigma_scale=sigma_scale)
     N, V = gc.n, gc.n_views
     use_symmetry = symmetric and gc.self_costs is not None
     orders = symmetry.orders_from_self_costs(gc.self_costs, gc.auto_sigma()) if use_symmetry else np.ones(N, np.int64)
     op = gc.operator(s)
     if np.any(orders != 1):
         labels = solve_labels_with_symmetry(gc, solver, s, seed, 0, orders)
-        out = {"labels": labels, "energy": float(mrf.energy(op, uniform_unary(N, V, seed), labels))}
+        out = {"labels": labels, "energy": float(mrf.energy(op, uniform_unary(N, V, seed=seed), labels))}
     else:
         out = solve_labels(gc, solver, s, seed, op=op)
     del op

@@ -25,7 +25,7 @@ __all__ = ["symmetry_orders", "orders_from_self_costs", "symmetry_periods", "dow
            "place_against"]
 
 
-def symmetry_orders(C: np.ndarray, scale: float | None = None, tolerance: float = 0.05,
+def symmetry_orders(C: np.ndarray, scale: float | None = None, *, tolerance: float = 0.05,
                     samples_per_step: int = 4) -> np.ndarray:
     """(N,) int symmetry order of each shape from the diagonal C_ii(theta) of pair costs C: (N, N, V).
 
@@ -37,10 +37,11 @@ def symmetry_orders(C: np.ndarray, scale: float | None = None, tolerance: float 
     C = np.asarray(C)
     N = C.shape[0]
     scale = auto_sigma(C) if scale is None else float(scale)
-    return orders_from_self_costs(C[np.arange(N), np.arange(N)], scale, tolerance, samples_per_step)
+    return orders_from_self_costs(C[np.arange(N), np.arange(N)], scale, tolerance=tolerance,
+                                  samples_per_step=samples_per_step)
 
 
-def orders_from_self_costs(self_costs: np.ndarray, scale: float, tolerance: float = 0.05,
+def orders_from_self_costs(self_costs: np.ndarray, scale: float, *, tolerance: float = 0.05,
                            samples_per_step: int = 4, chunk: int = 2048) -> np.ndarray:
     """(N,) int symmetry orders from each shape's self costs C_ii: (N, V) and the collection's cost ``scale``
     (see ``symmetry_orders``, which reads both off a dense C; a candidate graph gives them directly). Rows are
@@ -158,7 +159,7 @@ def _harmonic_sync_graph(gc, k: int, sigma: float) -> np.ndarray:
     if gc.n == 1:
         return np.zeros(1, np.int64)
     V = gc.n_views
-    z = top_eigenvector(gc.harmonic(sigma, k))
+    z = top_eigenvector(gc.harmonic(sigma, h=k))
     z = z * np.exp(-1j * np.angle(z[0]))
     return np.rint(-np.angle(z) * V / (2 * np.pi * k)).astype(np.int64) % V
 

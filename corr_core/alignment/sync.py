@@ -25,13 +25,13 @@ __all__ = ["sync_matrix", "spectral_sync", "spectral_sync_operator", "round_phas
 
 
 def sync_matrix(C: np.ndarray, sigma: float | None = None, neighbors: np.ndarray | None = None,
-                harmonic: int = 1) -> np.ndarray:
+                *, harmonic: int = 1) -> np.ndarray:
     """H: (N, N) complex128 Hermitian, H_ij = sum_theta exp(-C_ij(theta)/sigma) exp(i 2 pi harmonic theta/V),
     zero diagonal (and zero off the optional neighbour graph, see CirculantPairwise). sigma=None: auto_sigma.
     Always a dense ndarray (see ``CirculantPairwise.harmonic`` for the sparse form)."""
     if sigma is None:
         sigma = auto_sigma(C)
-    H = CirculantPairwise(C, sigma, neighbors).harmonic(harmonic)
+    H = CirculantPairwise(C, sigma, neighbors).harmonic(h=harmonic)
     return H.toarray() if hasattr(H, "toarray") else H
 
 
@@ -52,9 +52,9 @@ def top_eigenvector(H) -> np.ndarray:
 
 def spectral_sync_operator(op: CirculantPairwise, normalize: bool = True) -> np.ndarray:
     """Labels (N,) int from a built CirculantPairwise (dense or kNN-sparse): the top eigenvector of its first
-    harmonic H (``op.harmonic(1)``), degree-normalized if ``normalize``. Lets a caller that already holds the
+    harmonic H (``op.harmonic(h=1)``), degree-normalized if ``normalize``. Lets a caller that already holds the
     operator (e.g. for energies) avoid building the kernel twice."""
-    H = op.harmonic(1)
+    H = op.harmonic(h=1)
     if normalize:
         deg = np.asarray(abs(H).sum(axis=1)).ravel()
         s = 1.0 / np.sqrt(np.where(deg > 0, deg, 1.0))
@@ -89,7 +89,7 @@ def round_phases(z: np.ndarray, V: int) -> np.ndarray:
 
 
 def projected_power(C: np.ndarray, sigma: float | None = None, labels0: np.ndarray | None = None,
-                    score: str = "kernel", max_iter: int = 100,
+                    score: str = "kernel", *, max_iter: int = 100,
                     neighbors: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Chen & Candes projected power method (hard projection) on the pairwise scores; returns
     (labels (N,) int, iterations). score="kernel": exp(-C/sigma) (robust to outlier pairs: bounded);
@@ -101,10 +101,11 @@ def projected_power(C: np.ndarray, sigma: float | None = None, labels0: np.ndarr
         raise ValueError(f"score must be 'kernel' or 'log', got {score!r}")
     op = _centered_score_operator(C, sigma, score, neighbors)
     labels = spectral_sync(C, sigma, neighbors) if labels0 is None else np.asarray(labels0, np.int64) % op.n_labels
-    return projected_power_operator(op, labels, max_iter)
+    return projected_power_operator(op, labels, max_iter=max_iter)
 
 
-def projected_power_operator(op: CirculantPairwise, labels0: np.ndarray, max_iter: int = 100) -> tuple[np.ndarray, int]:
+def projected_power_operator(op: CirculantPairwise, labels0: np.ndarray, *,
+                             max_iter: int = 100) -> tuple[np.ndarray, int]:
     """The hard projected power iteration z <- onehot(argmax_a (S z)_a) from labels0 (N,) int on a built score
     operator S (``CirculantPairwise``, dense or sparse; e.g. centred kernels): (labels (N,) int, iterations)."""
     N, V = op.n_nodes, op.n_labels

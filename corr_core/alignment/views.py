@@ -55,7 +55,7 @@ def background_color(rgb: np.ndarray, mode: str = "RGB") -> tuple[int, int, int]
     return tuple(int(c) for c in colors[int(np.argmax(counts))])
 
 
-def pad_to_square(image: np.ndarray, fill: float = 1.0) -> np.ndarray:
+def pad_to_square(image: np.ndarray, *, fill: float = 1.0) -> np.ndarray:
     """Pad a (H, W) image with ``fill`` to (S, S), S = max(H, W), keeping it centred."""
     height, width = image.shape
     side = max(height, width)
@@ -73,7 +73,7 @@ def resize_square(image: np.ndarray, size: int) -> np.ndarray:
     return np.clip(np.asarray(resized, dtype=np.float32), 0.0, 1.0)
 
 
-def crop_to_object(image: np.ndarray, size: int | None = None, background: float = 1.0) -> np.ndarray:
+def crop_to_object(image: np.ndarray, size: int | None = None, *, background: float = 1.0) -> np.ndarray:
     """Crop a rendered view to its object's bounding box, pad square, resize: the course framing.
 
     Args:
@@ -92,7 +92,7 @@ def crop_to_object(image: np.ndarray, size: int | None = None, background: float
     return resize_square(pad_to_square(image, fill=background), size)
 
 
-def load_view_image(path: str | os.PathLike, size: int = 120) -> np.ndarray:
+def load_view_image(path: str | os.PathLike, *, size: int = 120) -> np.ndarray:
     """Load one course view as a (size, size) float32 grayscale image, white background.
 
     Args:
@@ -117,7 +117,7 @@ def load_view_image(path: str | os.PathLike, size: int = 120) -> np.ndarray:
     return resize_square(pad_to_square(gray), size)
 
 
-def load_view_stack(paths: list[str | os.PathLike], size: int = 120) -> np.ndarray:
+def load_view_stack(paths: list[str | os.PathLike], *, size: int = 120) -> np.ndarray:
     """Load views in the given order.
 
     Args:
@@ -128,7 +128,7 @@ def load_view_stack(paths: list[str | os.PathLike], size: int = 120) -> np.ndarr
     """
     if len(paths) == 0:
         raise ValueError("load_view_stack needs at least one path")
-    return np.stack([load_view_image(path, size) for path in paths])
+    return np.stack([load_view_image(path, size=size) for path in paths])
 
 
 def find_view_files(folder: str | os.PathLike, n_views: int | None = None) -> dict[str, list[str]]:

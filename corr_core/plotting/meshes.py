@@ -59,7 +59,8 @@ def _scene(V: np.ndarray, F: np.ndarray):
 
 
 def _rays(view: int, n_views: int, size: int, elevation_deg: float):
-    return load_open3d().core.Tensor(view_rays(n_views, size, elevation_deg, MARGIN)[view])
+    rays = view_rays(n_views=n_views, image_size=size, elevation_deg=elevation_deg, margin=MARGIN)
+    return load_open3d().core.Tensor(rays[view])
 
 
 def render_colored(V: np.ndarray, F: np.ndarray, colors: np.ndarray, *, view: int = 0, n_views: int = 8,
@@ -85,7 +86,7 @@ def render_colored(V: np.ndarray, F: np.ndarray, colors: np.ndarray, *, view: in
     f, u, v = face[valid], uv[valid, 0], uv[valid, 1]
     tri = F[f]
     rgb = (1 - u - v)[:, None] * colors[tri[:, 0]] + u[:, None] * colors[tri[:, 1]] + v[:, None] * colors[tri[:, 2]]
-    back = camera_frames(n_views, elevation_deg)[view, 2]
+    back = camera_frames(n_views=n_views, elevation_deg=elevation_deg)[view, 2]
     shade = ambient + (1 - ambient) * np.abs(face_normals(V, F)[f] @ back)
     image[valid] = np.clip(rgb * shade[:, None], 0, 1)
     return image
@@ -98,7 +99,7 @@ def project_vertices(V: np.ndarray, F: np.ndarray, vids: np.ndarray, *, view: in
 
     Returns (xy (k,2) float pixel column/row, visible (k,) bool)."""
     V = np.asarray(V, np.float64)
-    right, up, back = camera_frames(n_views, elevation_deg)[view]
+    right, up, back = camera_frames(n_views=n_views, elevation_deg=elevation_deg)[view]
     P = V[np.asarray(vids, np.int64)]
     half = size / 2
     xy = np.stack([(P @ right / MARGIN + 1) * half, (1 - P @ up / MARGIN) * half], axis=1)

@@ -38,18 +38,18 @@ def mirrored_costs(F):
 def test_descriptor_is_invariant_under_cyclic_view_shifts(dim):
     rng = np.random.default_rng(1)
     F = rng.normal(size=(16, 50)).astype(np.float32)
-    d = candidates.rotation_invariant_descriptor(F, dim)
+    d = candidates.rotation_invariant_descriptor(F, dim=dim)
     for s in (1, 5, 8, 15):
-        np.testing.assert_allclose(candidates.rotation_invariant_descriptor(np.roll(F, s, axis=0), dim), d,
+        np.testing.assert_allclose(candidates.rotation_invariant_descriptor(np.roll(F, s, axis=0), dim=dim), d,
                                    rtol=1e-5, atol=1e-5)
     # it is not blind: another view order (not a rotation) or another shape changes it
-    assert not np.allclose(candidates.rotation_invariant_descriptor(F[rng.permutation(16)], dim), d, atol=1e-3)
-    assert not np.allclose(candidates.rotation_invariant_descriptor(F + 0.3, dim), d, atol=1e-3)
+    assert not np.allclose(candidates.rotation_invariant_descriptor(F[rng.permutation(16)], dim=dim), d, atol=1e-3)
+    assert not np.allclose(candidates.rotation_invariant_descriptor(F + 0.3, dim=dim), d, atol=1e-3)
 
 
 def test_full_descriptor_distance_is_a_lower_bound_of_the_best_rotation_cost():
     F, _ = planted_features(N=12, V=16, noise=1.0)
-    M = candidates.rotation_invariant_descriptor(F, 0)
+    M = candidates.rotation_invariant_descriptor(F, dim=0)
     dist2 = ((M[:, None] - M[None]) ** 2).sum(axis=2)
     best = pair_costs(F).min(axis=2)
     assert np.all(dist2 <= best * (1 + 1e-4) + 1e-3)
@@ -58,11 +58,11 @@ def test_full_descriptor_distance_is_a_lower_bound_of_the_best_rotation_cost():
 
 def test_descriptor_batch_and_projection_are_deterministic():
     F, _ = planted_features(N=5)
-    batch = candidates.rotation_invariant_descriptor(F, 8, seed=3)
+    batch = candidates.rotation_invariant_descriptor(F, dim=8, seed=3)
     assert batch.shape == (5, 8) and batch.dtype == np.float32
-    np.testing.assert_array_equal(batch, candidates.rotation_invariant_descriptor(F, 8, seed=3))
-    np.testing.assert_allclose(batch[2], candidates.rotation_invariant_descriptor(F[2], 8, seed=3), rtol=1e-5)
-    assert not np.allclose(batch, candidates.rotation_invariant_descriptor(F, 8, seed=4))
+    np.testing.assert_array_equal(batch, candidates.rotation_invariant_descriptor(F, dim=8, seed=3))
+    np.testing.assert_allclose(batch[2], candidates.rotation_invariant_descriptor(F[2], dim=8, seed=3), rtol=1e-5)
+    assert not np.allclose(batch, candidates.rotation_invariant_descriptor(F, dim=8, seed=4))
     with pytest.raises(ValueError, match=r"\(V, D\)"):
         candidates.rotation_invariant_descriptor(np.zeros(5))
 
@@ -169,7 +169,7 @@ def planted_graph():
     def build(N: int, k: int, n_random: int) -> dict:
         F, offsets = planted_features(N=N)
         C = mirrored_costs(F)
-        pairs, kind = candidates.candidate_pairs(candidates.rotation_invariant_descriptor(F, 8), k=k,
+        pairs, kind = candidates.candidate_pairs(candidates.rotation_invariant_descriptor(F, dim=8), k=k,
                                                  n_random=n_random, self_pairs=False)
         gc = graph_costs.from_dense(C, pairs, np.isin(kind, candidates.SAMPLE_KINDS))
         return {"offsets": offsets, "C": C, "pairs": pairs, "kind": kind, "gc": gc}
@@ -207,7 +207,7 @@ def test_graph_refinement_equals_the_dense_refinement_on_all_pairs():
 def test_graph_costs_from_engine_pairs_mark_the_sample_and_self_costs():
     F, _ = planted_features(N=30)
     C = mirrored_costs(F)
-    X = candidates.rotation_invariant_descriptor(F, 8)
+    X = candidates.rotation_invariant_descriptor(F, dim=8)
     pairs, kind = candidates.candidate_pairs(X, k=3, n_random=1, self_pairs=False)
     names = [f"s{i:02d}" for i in range(30)]
     graph = {"names": names[::-1], "pairs": 29 - pairs, "kind": kind, "self_costs": C[np.arange(30), np.arange(30)][::-1]}

@@ -105,7 +105,7 @@ def test_sparse_operator_equals_dense_operator_restricted_to_knn_graph(k):
     for j, b in itertools.product(range(N), range(V)):
         np.testing.assert_array_equal(sparse.column(j, b), restricted.column(j, b))
     np.testing.assert_array_equal(sparse.block_max(), restricted.block_max())
-    np.testing.assert_allclose(np.asarray(sparse.harmonic(1).todense()), restricted.harmonic(1), atol=1e-13)
+    np.testing.assert_allclose(np.asarray(sparse.harmonic(h=1).todense()), restricted.harmonic(h=1), atol=1e-13)
     # memory: only the graph's edges are stored (E x V float32), never N x N x V
     E = _graph_mask(N, nb).sum()
     assert sparse.K_edges.shape == (E, V) and sparse.K_edges.dtype == np.float32

@@ -148,7 +148,7 @@ def test_histograms_of_the_gradient_pixels_only_equal_the_dense_computation_bit_
     cases = {"chair views": chair_views(index=4, n_views=4), "random": rng.random((3, 37, 53)).astype(np.float32),
              "smooth": smooth_test_image(), "flat": flat, "one edge": edge}
     for name, images in cases.items():
-        got = gradient_histograms(images, bin_size, n_orients)
+        got = gradient_histograms(images, bin_size=bin_size, n_orients=n_orients)
         expected = dense_reference_histograms(images, bin_size, n_orients)
         assert got.dtype == np.float32 and got.shape == expected.shape, name
         np.testing.assert_array_equal(got, expected, err_msg=name)

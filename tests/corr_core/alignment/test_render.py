@@ -47,7 +47,7 @@ def asymmetric_mesh():
 
 
 def test_camera_frames_are_rotated_copies():
-    frames = camera_frames(N_VIEWS, 20.0)
+    frames = camera_frames(n_views=N_VIEWS, elevation_deg=20.0)
     for frame in frames:
         np.testing.assert_allclose(frame @ frame.T, np.eye(3), atol=1e-12)
         assert np.isclose(np.linalg.det(frame), 1.0)  # right-handed: right x up = back
@@ -122,10 +122,10 @@ def render_every_ray(V, F, n_views=16, image_size=120, elevation_deg=20.0, margi
     V = np.asarray(V, dtype=np.float32)
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.core.Tensor(V), o3d.core.Tensor(np.asarray(F).astype(np.uint32)))
-    rays = view_rays(n_views, image_size, elevation_deg, margin)
+    rays = view_rays(n_views=n_views, image_size=image_size, elevation_deg=elevation_deg, margin=margin)
     face = scene.cast_rays(o3d.core.Tensor(rays))["primitive_ids"].numpy()
     hit = face != scene.INVALID_ID
-    backs = camera_frames(n_views, elevation_deg)[:, 2].astype(np.float32)
+    backs = camera_frames(n_views=n_views, elevation_deg=elevation_deg)[:, 2].astype(np.float32)
     shade = ambient + diffuse * np.abs(np.einsum("fi,vi->fv", face_normals(V, F).astype(np.float32), backs))
     images = np.ones(face.shape, np.float32)
     images[hit] = shade[face[hit], np.nonzero(hit)[0]]

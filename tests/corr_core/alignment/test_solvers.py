@@ -21,9 +21,9 @@ def test_uniform_unary_is_seeded_and_in_unit_interval():
 def test_choose_sigma_auto_or_given_times_scale():
     C, _ = planted_pair_costs()
     assert choose_sigma(C) == pytest.approx(auto_sigma(C))
-    assert choose_sigma(C, "auto", 2.0) == pytest.approx(2 * auto_sigma(C))
-    assert choose_sigma(C, None, 0.5) == pytest.approx(0.5 * auto_sigma(C))
-    assert choose_sigma(C, 3.0, 2.0) == 6.0
+    assert choose_sigma(C, "auto", sigma_scale=2.0) == pytest.approx(2 * auto_sigma(C))
+    assert choose_sigma(C, None, sigma_scale=0.5) == pytest.approx(0.5 * auto_sigma(C))
+    assert choose_sigma(C, 3.0, sigma_scale=2.0) == 6.0
 
 
 def test_knn_neighbors_complete_graph_when_k_covers_everyone():
@@ -40,7 +40,7 @@ def test_every_solver_recovers_planted_offsets(solver, knn):
     assert out["labels"].dtype == np.int64
     assert agreement_up_to_offset(out["labels"], offsets, C.shape[2])[0] == 1.0
     op = CirculantPairwise(C, auto_sigma(C), knn_neighbors(C, knn))
-    U = uniform_unary(len(C), C.shape[2], 0)
+    U = uniform_unary(len(C), C.shape[2], seed=0)
     assert out["energy"] == pytest.approx(mrf.energy(op, U, out["labels"]))
     assert ("converged" in out) == (solver == "lh")
 

@@ -72,7 +72,7 @@ def test_projected_power_and_lh_exact_with_outliers(seed, outlier_frac):
     C, offsets = synthetic_costs(seed=seed, outlier_frac=outlier_frac)
     labels, _ = projected_power(C)
     assert agreement_up_to_offset(labels, offsets, 16)[0] == 1.0
-    res = solve_lh(CirculantPairwise(C, auto_sigma(C)), uniform_unary(len(offsets), 16, seed), compute_bound=False)
+    res = solve_lh(CirculantPairwise(C, auto_sigma(C)), uniform_unary(len(offsets), 16, seed=seed), compute_bound=False)
     assert agreement_up_to_offset(res.labels, offsets, 16)[0] == 1.0
 
 
@@ -152,7 +152,7 @@ def test_spectral_ppm_and_lh_exact_on_knn_graph(seed):
     assert agreement_up_to_offset(projected_power(C, sigma, neighbors=nb)[0], offsets, 16)[0] == 1.0
     op = CirculantPairwise(C, sigma, nb)
     assert op.sparse
-    res = solve_lh(op, uniform_unary(60, 16, seed), compute_bound=False)
+    res = solve_lh(op, uniform_unary(60, 16, seed=seed), compute_bound=False)
     assert agreement_up_to_offset(res.labels, offsets, 16)[0] == 1.0
 
 

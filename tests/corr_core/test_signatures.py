@@ -1,6 +1,5 @@
-"""Every tuning number of the correspondence modules (``corr_core/correspondence``, dense maps included) is a
-keyword-only argument: a call reads ``refine_extrinsic(S, T, p2p, n_patches=150)``, never
-``refine_extrinsic(S, T, p2p, 150)``."""
+"""Every tuning number in ``corr_core`` is a keyword-only argument: a call reads
+``refine_extrinsic(S, T, p2p, n_patches=150)``, never ``refine_extrinsic(S, T, p2p, 150)``."""
 from __future__ import annotations
 
 import ast
@@ -8,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-CORRESPONDENCE = Path(__file__).resolve().parents[3] / "corr_core" / "correspondence"
+CORR_CORE = Path(__file__).resolve().parents[2] / "corr_core"
 
 
 def _is_number(node: ast.AST, constants: set[str]) -> bool:
@@ -39,9 +38,9 @@ def positional_numbers(source: str) -> list[str]:
     return found
 
 
-@pytest.mark.parametrize("module", sorted(str(p.relative_to(CORRESPONDENCE)) for p in CORRESPONDENCE.rglob("*.py")))
+@pytest.mark.parametrize("module", sorted(str(p.relative_to(CORR_CORE)) for p in CORR_CORE.rglob("*.py")))
 def test_tuning_numbers_are_keyword_only(module):
-    assert positional_numbers((CORRESPONDENCE / module).read_text()) == []
+    assert positional_numbers((CORR_CORE / module).read_text()) == []
 
 
 def test_the_check_sees_a_positional_number_and_not_a_keyword_only_one():
