@@ -35,7 +35,10 @@ import tempfile
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from bench._env import ROOT  # noqa: E402
+from bench._env import ROOT, one_blas_thread  # noqa: E402
+
+if __name__ == "__main__":
+    one_blas_thread()      # the profiled tasks run in this process with one BLAS thread, as in a dask worker
 
 PIPELINE = "pipeline.yaml"
 GENERATING = "generating dataset"
