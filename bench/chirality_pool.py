@@ -43,15 +43,15 @@ def candidate_rows(S, T, truth_original: np.ndarray) -> list[dict]:
 
     _, info = init.automatic_hypotheses(S, T, n=1, k_init=SETTINGS["k_init"], k_end=SETTINGS["k"],
                                         return_info=True)
-    best = max(c["chirality"] for c in info["candidates"])
+    best = max(c.chirality for c in info["candidates"])
     rows = []
     for c in info["candidates"]:
-        p2p = c["map"][1]                                        # target vertex of each template sample (local)
+        p2p = c.p2p                                              # target vertex of each template sample (local)
         samples = S.samples[:len(p2p)]
         true_images = T.to_local(truth_original[S.vids[samples]], what="true image")
         gap = np.linalg.norm(T.V[p2p] - T.V[true_images], axis=1) / T.scale
         near = float(np.mean(gap < 0.1))
-        rows.append({"class": classify(near), "ratio": float(c["chirality"] / best) if best > 0 else float("nan"),
+        rows.append({"class": classify(near), "ratio": float(c.chirality / best) if best > 0 else float("nan"),
                      "near": near})
     return rows
 

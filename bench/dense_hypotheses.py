@@ -62,7 +62,7 @@ def score_candidates(S, T, V_t, F_t, truth, landmarks, n_candidates: int) -> lis
                                        vertices=S.vids[S.samples[:SETTINGS["eval_vertices"]]], solver=solver)["m"]
         _, nearest = measures.landmark_errors(V_t, F_t, transfer_landmarks(vertex_map, landmarks),
                                               truth[landmarks], solver=solver)
-        rows.append({"chirality": c["chirality"], "wks": c["wks"], "distortion": refine.map_distortion(S, T, refined),
+        rows.append({"chirality": c.chirality, "wks": c.wks, "distortion": refine.map_distortion(S, T, refined),
                      "mean_error": float(errors.mean()), "landmark_accuracy": measures.landmark_accuracy(nearest)})
     return rows
 
@@ -73,7 +73,7 @@ def choice(rows: list[dict]) -> dict:
     from corr_core.correspondence.dense.init import hypotheses_to_refine
     from corr_core.correspondence.dense.refine import BestMap
 
-    n = hypotheses_to_refine(rows)
+    n = hypotheses_to_refine([r["chirality"] for r in rows], [r["wks"] for r in rows])
     best = BestMap(np.zeros(0, dtype=np.int64), int(np.argmin([r["distortion"] for r in rows[:n]])),
                    tuple(r["distortion"] for r in rows[:n]))
     kept = rows[best.index]

@@ -26,6 +26,7 @@ first is noise, and the second (low-pass) misses the front/back differences (mea
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from itertools import permutations
 
 import numpy as np
@@ -314,8 +315,9 @@ def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarra
             of each mesh; the chosen one then goes on to ``k_end`` as ``map_from_points`` does).
         orientation_neighbours: samples per local fit in ``orientation_agreement`` (a probe is coarser than the
             sample spacing, so the local fits need more than the nearest few samples).
-    Returns: (C, p2p_samples) as ``map_from_points``; with ``return_info`` also a dict (points, the chosen
-        assignment, every candidate's distortion, orientation agreement, WKS and HKS disagreement and probe map).
+    Returns: (C, p2p_samples) as ``map_from_points``; with ``return_info`` also a dict ("points_source",
+        "points_target", "chosen": the assigned points, "candidates": every ``Candidate`` with its orientation
+        agreement and HKS disagreement filled in).
     """
     out = automatic_hypotheses(source, target, n=1, points_source=points_source, points_target=points_target,
                                keep=keep, k_init=k_init, k_probe=k_probe, k_end=k_end, step=step, n_probe=n_probe,
@@ -323,19 +325,42 @@ def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarra
     return (*out[0][0], out[1]) if return_info else out[0]
 
 
-def hypotheses_to_refine(ranked: list[dict], *, keep_fraction: float = CHIRALITY_POOL,
+@dataclass(frozen=True)
+class Candidate:
+    """One automatic starting map (``automatic_hypotheses``): which feature points it assigned and how it scores.
+
+    source, target: (a,) int positions into the two meshes' feature points, assigned pairwise; cost: the
+    assignment's geodesic distortion; C: (k_s, k_t) its probe functional map; p2p: (n_probe,) int its probe point
+    map (local target ids of the template's probe samples); chirality: ``chirality_agreement`` (< 0: mirrored);
+    wks: ``wks_disagreement``; orientation, hks: reported only (``return_info``), not used by the choice."""
+    source: np.ndarray
+    target: np.ndarray
+    cost: float
+    C: np.ndarray
+    p2p: np.ndarray
+    chirality: float
+    wks: float
+    orientation: float | None = None
+    hks: float | None = None
+
+
+def hypotheses_to_refine(chirality, wks, *, keep_fraction: float = CHIRALITY_POOL,
                          wks_ratio: float = HYPOTHESIS_WKS_RATIO, at_least: int = MIN_HYPOTHESES,
                          at_most: int = MAX_HYPOTHESES) -> int:
-    """How many of the ranked candidates (``rank_candidates``: dicts with "chirality" and "wks") to refine: at least
-    ``at_least`` (when there are that many), plus those in the chirality pool whose WKS disagreement is within
-    ``wks_ratio`` times the best's, at most ``at_most``."""
-    if not ranked:
+    """How many of the ranked candidates (``rank_candidates`` order) to refine: at least ``at_least`` (when there
+    are that many), plus those in the chirality pool whose WKS disagreement is within ``wks_ratio`` times the
+    best's, at most ``at_most``.
+
+    Args: chirality, wks: (c,) float the candidates' ``Candidate.chirality`` and ``Candidate.wks``, best first.
+    """
+    chirality, wks = np.asarray(chirality, dtype=np.float64), np.asarray(wks, dtype=np.float64)
+    if not len(chirality):
         return 0
-    best = max(c["chirality"] for c in ranked)
-    close = [i for i, c in enumerate(ranked) if best > 0 and c["chirality"] > keep_fraction * best
-             and c["wks"] <= wks_ratio * ranked[0]["wks"]]
-    n = max([min(at_least, len(ranked))] + [i + 1 for i in close])
-    return int(min(n, at_most, len(ranked)))
+    best = chirality.max()
+    close = [i for i in range(len(chirality)) if best > 0 and chirality[i] > keep_fraction * best
+             and wks[i] <= wks_ratio * wks[0]]
+    n = max([min(at_least, len(chirality))] + [i + 1 for i in close])
+    return int(min(n, at_most, len(chirality)))
 
 
 def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int | None = None,
@@ -375,23 +400,24 @@ def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int | None = N
         C, p2p = map_from_points(source, target, source.vids[Ps[s]], target.vids[Pt[t]], k_init=k_init,
                                  k_end=min(k_probe, k_end), step=5, features=(FS, FT), n_zoomout=n_probe,
                                  all_target_vertices=False)
-        candidate = {"source": s, "target": t, "distortion": cost, "map": (C, p2p),
-                     "chirality": chirality_agreement(source, p2p, FS[:, -n_pairs:], FT[:, -n_pairs:]),
-                     "wks": wks_disagreement(source, target, p2p)}
+        reported = {}
         if return_info:                                          # reported only: not used by the choice
-            candidate["orientation"] = orientation_agreement(source, target, p2p, neighbours=orientation_neighbours)
-            candidate["hks"] = hks_disagreement(source, target, p2p)
-        info["candidates"].append(candidate)
+            reported = {"orientation": orientation_agreement(source, target, p2p, neighbours=orientation_neighbours),
+                        "hks": hks_disagreement(source, target, p2p)}
+        info["candidates"].append(Candidate(
+            s, t, float(cost), C, p2p, chirality=chirality_agreement(source, p2p, FS[:, -n_pairs:], FT[:, -n_pairs:]),
+            wks=wks_disagreement(source, target, p2p), **reported))
     ranked = rank_candidates(info["candidates"])
-    ranked = ranked[:hypotheses_to_refine(ranked) if n is None else int(n)]
-    s, t = ranked[0]["source"], ranked[0]["target"]
+    n_kept = hypotheses_to_refine([c.chirality for c in ranked], [c.wks for c in ranked]) if n is None else int(n)
+    ranked = ranked[:n_kept]
+    s, t = ranked[0].source, ranked[0].target
     info["chosen"] = (Ps[s], Pt[t])
-    maps = [_zoomout_and_match(source, target, c["map"][0], k_end=k_end, step=step, n_zoomout=ZOOMOUT_SAMPLES,
+    maps = [_zoomout_and_match(source, target, c.C, k_end=k_end, step=step, n_zoomout=ZOOMOUT_SAMPLES,
                                all_target_vertices=True) for c in ranked]
     return (maps, info) if return_info else maps
 
 
-def rank_candidates(candidates: list[dict], *, keep_fraction: float = CHIRALITY_POOL) -> list[dict]:
+def rank_candidates(candidates: list[Candidate], *, keep_fraction: float = CHIRALITY_POOL) -> list[Candidate]:
     """Candidates best first: those that keep the assigned points' orientation (chirality agreement above
     ``keep_fraction`` of the best candidate's, and > 0) by increasing WKS disagreement, then the others by
     decreasing chirality agreement.
@@ -400,10 +426,10 @@ def rank_candidates(candidates: list[dict], *, keep_fraction: float = CHIRALITY_
     only the feet swapped: a twist) keeps a fraction of it (0.32-0.89 of the best on generated bodies, see
     ``CHIRALITY_POOL``: the pool drops the clearest twists only); the true map and the orientation-preserving
     180-degree turn keep most of it, and the descriptors (then the refined maps' distortion) decide."""
-    best = max(c["chirality"] for c in candidates)
-    in_pool = [best > 0 and c["chirality"] > keep_fraction * best for c in candidates]
-    pool = sorted((c for c, ok in zip(candidates, in_pool) if ok), key=lambda c: c["wks"])
-    rest = sorted((c for c, ok in zip(candidates, in_pool) if not ok), key=lambda c: -c["chirality"])
+    best = max(c.chirality for c in candidates)
+    in_pool = [best > 0 and c.chirality > keep_fraction * best for c in candidates]
+    pool = sorted((c for c, ok in zip(candidates, in_pool) if ok), key=lambda c: c.wks)
+    rest = sorted((c for c, ok in zip(candidates, in_pool) if not ok), key=lambda c: -c.chirality)
     return pool + rest
 
 

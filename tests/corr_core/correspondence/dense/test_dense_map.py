@@ -211,7 +211,7 @@ def test_the_chirality_weight_reaches_the_probes(body):
 
     def agreements(**kw):
         _, info = automatic_hypotheses(body["S"], body["T"], 1, k_init=K_INIT, k_end=K, return_info=True, **kw)
-        return np.array([c["chirality"] for c in info["candidates"]])
+        return np.array([c.chirality for c in info["candidates"]])
 
     assert np.all(agreements(chirality_weight=0.0) == 0.0)
     assert np.all(np.abs(agreements()) > 0.05)
@@ -221,11 +221,11 @@ def test_hypotheses_to_refine_takes_the_best_two_and_any_close_pool_candidate():
     from corr_core.correspondence.dense.init import HYPOTHESIS_WKS_RATIO, hypotheses_to_refine
 
     def ranked(*pairs):
-        return [{"chirality": c, "wks": w} for c, w in pairs]
+        return hypotheses_to_refine([c for c, _ in pairs], [w for _, w in pairs])
 
-    assert hypotheses_to_refine(ranked((0.8, 0.05), (0.3, 0.09))) == 2                  # the runner-up, always
+    assert ranked((0.8, 0.05), (0.3, 0.09)) == 2                                     # the runner-up, always
     close = 0.05 * (HYPOTHESIS_WKS_RATIO - 0.01)
-    assert hypotheses_to_refine(ranked((0.8, 0.05), (0.8, 0.051), (0.79, close), (0.8, close))) == 3   # at most 3
-    assert hypotheses_to_refine(ranked((0.8, 0.05), (0.8, 0.051), (0.3, close))) == 2    # a twist: not in the pool
-    assert hypotheses_to_refine(ranked((0.8, 0.05), (0.8, 0.051), (0.8, 0.08))) == 2     # far in WKS
-    assert hypotheses_to_refine(ranked((0.8, 0.05))) == 1 and hypotheses_to_refine([]) == 0
+    assert ranked((0.8, 0.05), (0.8, 0.051), (0.79, close), (0.8, close)) == 3       # at most 3
+    assert ranked((0.8, 0.05), (0.8, 0.051), (0.3, close)) == 2                      # a twist: not in the pool
+    assert ranked((0.8, 0.05), (0.8, 0.051), (0.8, 0.08)) == 2                       # far in WKS
+    assert ranked((0.8, 0.05)) == 1 and ranked() == 0

@@ -52,11 +52,18 @@ def test_chirality_agreement_is_positive_for_a_map_and_negative_for_its_mirror(e
     assert init.chirality_agreement(B, identity, chir, chir_m) < -0.99
 
 
+def _candidate(cost: float, chirality: float, wks: float) -> "init.Candidate":
+    """A candidate told apart by its ``cost`` (a name here) and scored by chirality and WKS."""
+    empty = np.zeros(0, dtype=np.int64)
+    return init.Candidate(empty, empty, cost, np.eye(2), empty, chirality=chirality, wks=wks)
+
+
 def test_ranking_rejects_mirror_and_twisted_maps_then_takes_the_best_wks():
-    cands = [{"name": "mirror", "chirality": -0.8, "wks": 0.010},
-             {"name": "twist", "chirality": 0.45, "wks": 0.020},
-             {"name": "true", "chirality": 0.80, "wks": 0.030},
-             {"name": "turn", "chirality": 0.78, "wks": 0.035}]
-    assert [c["name"] for c in init.rank_candidates(cands)] == ["true", "turn", "twist", "mirror"]
-    all_negative = [dict(c, chirality=-abs(c["chirality"]) - 0.1) for c in cands]   # twist: -0.55, the highest
-    assert init.rank_candidates(all_negative)[0]["name"] == "twist"           # the one that keeps the orientation most
+    from dataclasses import replace
+
+    names = {0.0: "mirror", 1.0: "twist", 2.0: "true", 3.0: "turn"}
+    cands = [_candidate(0.0, -0.8, 0.010), _candidate(1.0, 0.45, 0.020), _candidate(2.0, 0.80, 0.030),
+             _candidate(3.0, 0.78, 0.035)]
+    assert [names[c.cost] for c in init.rank_candidates(cands)] == ["true", "turn", "twist", "mirror"]
+    all_negative = [replace(c, chirality=-abs(c.chirality) - 0.1) for c in cands]   # twist: -0.55, the highest
+    assert names[init.rank_candidates(all_negative)[0].cost] == "twist"   # the one that keeps the orientation most
