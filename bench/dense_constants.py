@@ -41,7 +41,7 @@ if __name__ == "__main__":
 
 import numpy as np  # noqa: E402
 
-from bench.dense_hypotheses import SETTINGS, seed_range, generated_targets  # noqa: E402
+from bench.dense_hypotheses import SETTINGS, generated_targets, resumed_results, seed_range  # noqa: E402
 
 DEFAULTS = {"chirality": 0.3, "stiffness": 0.03, "n_patches": SETTINGS["n_patches"], "patch_size": 64}
 BEFORE_DEFORM = "extrinsic+spectral"
@@ -238,10 +238,7 @@ def main(argv=None) -> int:
     from corr_core.geometry.mesh_io import load_mesh
 
     work = args.work or tempfile.mkdtemp(prefix="dense_constants_")
-    results = []
-    if args.json and os.path.isfile(args.json):               # resume: settings already in the file are kept
-        with open(args.json) as fh:
-            results = [r for r in json.load(fh) if r["seed"] in seed_range(args.seeds)]
+    results = resumed_results(args.json, seed_range(args.seeds))   # resume: settings already in the file are kept
     by_target = {(r["seed"], r["mesh"]): r for r in results}
     for seed in seed_range(args.seeds):
         root = os.path.join(work, f"bodies_seed{seed}")

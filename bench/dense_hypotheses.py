@@ -42,6 +42,15 @@ def seed_range(text: str) -> list[int]:
     return [int(x) for x in text.split(",")]
 
 
+def resumed_results(path: str | None, seeds: list[int] | None = None) -> list[dict]:
+    """The per-target results already in the ``--json`` file ``path`` (none when it is None or absent), those of
+    ``seeds`` only when given: a bench run again with the same file skips them."""
+    if not path or not os.path.isfile(path):
+        return []
+    with open(path) as fh:
+        return [r for r in json.load(fh) if seeds is None or r["seed"] in seeds]
+
+
 def score_candidates(S, T, V_t, F_t, truth, landmarks, n_candidates: int) -> list[dict]:
     """Every one of the ``n_candidates`` best ranked starting maps, refined and scored (module docstring)."""
     from corr_core.correspondence.dense import init, measures, refine, upsample_spectral
@@ -111,10 +120,7 @@ def main(argv=None) -> int:
     from corr_core.geometry.mesh_io import load_mesh
 
     work = args.work or tempfile.mkdtemp(prefix="dense_hypotheses_")
-    results = []
-    if args.json and os.path.isfile(args.json):               # resume: targets already in the file are kept
-        with open(args.json) as fh:
-            results = json.load(fh)
+    results = resumed_results(args.json)                     # resume: targets already in the file are kept
     done = {(r["seed"], r["mesh"]) for r in results}
     for seed in seed_range(args.seeds):
         root = os.path.join(work, f"bodies_seed{seed}")

@@ -33,7 +33,7 @@ if __name__ == "__main__":
 
 import numpy as np  # noqa: E402
 
-from bench.dense_hypotheses import seed_range  # noqa: E402
+from bench.dense_hypotheses import resumed_results, seed_range  # noqa: E402
 
 DEFAULT = (0.5, 4.0, 0.3)          # K, power, K_scale of pipeline.yaml (and of the corr.match_mobius stage)
 SCAPE = (0.5, 4.0, 0.5)            # pipelines/scape.yaml
@@ -81,10 +81,7 @@ def main(argv=None) -> int:
     from corr_core.generate.humanoid import write_humanoid_dataset
 
     work = args.work or tempfile.mkdtemp(prefix="mobius_sweep_")
-    results = []
-    if args.json and os.path.isfile(args.json):               # resume: settings already in the file are kept
-        with open(args.json) as fh:
-            results = [r for r in json.load(fh) if r["seed"] in seed_range(args.seeds)]
+    results = resumed_results(args.json, seed_range(args.seeds))   # resume: settings already in the file are kept
     by_target = {(r["seed"], r["mesh"]): r for r in results}
     for seed in seed_range(args.seeds):
         root = os.path.join(work, f"{'bodies' if args.other_bodies else 'same'}_seed{seed}")

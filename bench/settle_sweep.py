@@ -28,7 +28,7 @@ if __name__ == "__main__":
 
 import numpy as np  # noqa: E402
 
-from bench.dense_hypotheses import SETTINGS, seed_range, generated_targets  # noqa: E402
+from bench.dense_hypotheses import SETTINGS, generated_targets, resumed_results, seed_range  # noqa: E402
 
 BEFORE_SETTLING = "extrinsic+spectral+deform"
 
@@ -78,10 +78,7 @@ def main(argv=None) -> int:
     from corr_core.geometry.mesh_io import load_mesh
 
     work = args.work or tempfile.mkdtemp(prefix="settle_sweep_")
-    results = []
-    if args.json and os.path.isfile(args.json):               # resume: targets already in the file are kept
-        with open(args.json) as fh:
-            results = [r for r in json.load(fh) if r["seed"] in seed_range(args.seeds)]
+    results = resumed_results(args.json, seed_range(args.seeds))   # resume: targets already in the file are kept
     done = {(r["seed"], r["mesh"]) for r in results}
     for seed in seed_range(args.seeds):
         root = os.path.join(work, f"{'same' if args.same_body else 'bodies'}_seed{seed}")
