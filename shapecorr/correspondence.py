@@ -183,16 +183,16 @@ def match_mrf(template, target, landmarks, sparse_landmarks, *, sigma: float = 0
 
 @register("corr.match_mobius", group="correspondence", fanout="item")
 def match_mobius(template, target, template_mesh, target_mesh, landmarks, sparse_landmarks, *, K: float = 0.5,
-                 metric: str = "surface", K_scale: float = 0.3, power: float = 4.0, top: int = 100,
+                 metric: str = "surface", K_scale: float = 0.7, power: float = 4.0, top: int = 100,
                  dense_points: int = 200) -> dict:
     """(c) Möbius voting on the flattened meshes from triplets of sparse landmarks, extended to all landmarks
     by the consensus maps; plus a dense map from the best map and its geodesic errors.
 
     K: deformation-error threshold; with metric "surface" in units of the sample spacing
     sqrt(area / n_samples) (docs/mobius_notes.md), with "plane" in canonical-frame units (the paper).
-    K 0.5, power 4, K_scale 0.3 (pipeline.yaml, pipelines/bodies.yaml) stay; re-fitted on generated humanoids by
-    ``python bench/mobius_sweep.py --seeds 10-12 --poses 6 [--other-bodies]``, K_scale 0.7 matched 0.04-0.07 more
-    of the sparse landmarks (docs/mobius_notes.md, "In the pipeline").
+    K 0.5, power 4, K_scale 0.7 (every pipeline): fitted on generated humanoids of seeds no pipeline uses by
+    ``python bench/mobius_sweep.py --seeds 10-12 --poses 6 [--other-bodies]`` (K_scale 0.7 matched 0.04-0.07 more
+    of the sparse landmarks than 0.3; 0.5-1.0 a plateau; docs/mobius_notes.md, "In the pipeline").
     Returns {"sparse": (k,), "all": (L,), "dense_errors": (dense_points,) geodesic error / sqrt(area),
     "best_score": float, "vertex_map": (n_template,) int target vertex of each template vertex}. The dense
     errors need the truth "vertex i <-> vertex i", i.e. the same vertex count and faces as the template;

@@ -123,7 +123,7 @@ def dense_vertex_map(best_map: dict, Z_template: np.ndarray, Z_target: np.ndarra
 
 
 def match_mobius(template_flat: dict, target_flat: dict, template_mesh: dict, target_mesh: dict,
-                 sparse: np.ndarray, *, K: float = 0.5, metric: str = "surface", K_scale: float = 0.3,
+                 sparse: np.ndarray, *, K: float = 0.5, metric: str = "surface", K_scale: float = 0.7,
                  power: float = 4.0, top: int = 100, dense_points: int = 200) -> dict:
     """Möbius voting from triplets of sparse landmarks, extended to all landmarks by the consensus maps (the
     maps that agree with the vote; the best maps when none does), and a dense map from the best map.
