@@ -5,7 +5,8 @@ import pytest
 
 from corr_core.correspondence.mobius import (apply_mobius, compose_mobius, dense_map, extend_landmarks, fit_mobius,
                               invert_mobius, mobius_derivative_abs, mobius_from_triplets,
-                              mobius_to_canonical, mobius_vote_landmarks, mutually_closest_pairs, ROOTS3)
+                              mobius_to_canonical, mobius_vote_landmarks, mutually_closest_pairs, ROOTS3,
+                              score_maps)
 
 from tests.helpers import COURSE_DATA
 
@@ -136,3 +137,13 @@ def test_scape_two_meshes_voting():
     ext = extend_landmarks(out["consensus_maps"], Zs[vertex_to_edge(full, Es)], Zt[vertex_to_edge(full, Et)],
                            top=100)
     assert np.mean(ext == np.arange(20)) >= 0.9                      # measured 1.0
+
+
+def test_score_maps_gives_the_same_scores_whatever_the_block_size():
+    rng = np.random.default_rng(3)
+    ms, mt = (rng.standard_normal((13, 4)) + 1j * rng.standard_normal((13, 4)) for _ in range(2))
+    Zs, Zt = (rng.standard_normal(40) + 1j * rng.standard_normal(40) for _ in range(2))
+    lam_s, lam_t = rng.random(40) + 0.5, rng.random(40) + 0.5
+    scores = [score_maps(ms, mt, Zs, Zt, K=0.8, metric="surface", lam_s=lam_s, lam_t=lam_t, K_scale=0.7,
+                                chunk=c) for c in (1, 4, 5, 256)]
+    assert scores[0].max() > 0 and all(np.array_equal(s, scores[0]) for s in scores[1:])
