@@ -101,6 +101,14 @@ SCHEDULER_TIMEOUT_S = 10
 DASHBOARD_ADDRESS = "127.0.0.1:0"  # this machine only, a free port (see docs/scale.md to expose it)
 
 
+# The environment of the local worker processes: one BLAS/OpenMP thread each (a task is one thread), and *not*
+# dask's default MALLOC_TRIM_THRESHOLD_=65536: with it glibc stops adapting its mmap threshold, every array above
+# 128 KB is mapped and unmapped afresh, and numpy-heavy tasks ran 2-3x slower in a worker than in a plain
+# process (`python bench/worker_env.py`: see docs/engine.md "Execution"). Memory freed by a task is then kept by
+# the worker process for the next task instead of being returned to the system at once.
+WORKER_ENVIRON = {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1}
+
+
 def make_client(workers: int = 2, scheduler: str | None = None, local_dir: str | None = None,
                 memory_limit: str = "auto", log=None):
     """A dask.distributed Client: to ``scheduler`` if given, else a LocalCluster of ``workers`` processes.
@@ -119,7 +127,8 @@ def make_client(workers: int = 2, scheduler: str | None = None, local_dir: str |
     if scheduler:
         return _connect(Client, scheduler)
     dask.config.set({"distributed.worker.daemon": True, "distributed.admin.tick.limit": "60s",
-                     "distributed.worker.memory.terminate": False})
+                     "distributed.worker.memory.terminate": False,
+                     "distributed.nanny.pre-spawn-environ": dict(WORKER_ENVIRON)})
     with _ctrl_c_ignored_by_children():
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                dashboard_address=DASHBOARD_ADDRESS, local_directory=local_dir,
