@@ -36,7 +36,7 @@ from corr_core.geometry.sampling import farthest_point_samples
 from stages.registry import register
 
 from .landmark_sources import mesh_landmarks, numbered_like_template, sparse_positions
-from .skips import is_skipped, skip_reason, skip_reasons, skipped, without_skipped
+from .skips import holds, is_skipped, skip_reason, skip_reasons, skipped
 
 METHODS = ("dense_sparse", "dense_auto")
 KIM_LABELS = {"mobius": "Möbius (best map)", "dense_sparse": "dense_sparse (5 points)",
@@ -118,10 +118,11 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
                  patch_size: int = 64, rounds: int = 5, icp_iterations: int = 6, stiffness: float = 0.03) -> dict:
     """The dense map: the initial map upsampled to every template vertex (``upsample_spectral``), then refined
     (``refine``: steps of ``refine.refine_plan``, joined by "+" or as a list; "extrinsic+spectral+deform" =
-    patch-wise rigid ICP, full-resolution ZoomOut, ARAP registration, as ``dense_map``; "+settle" adds ARAP against the surface alone;
-    "extrinsic", "spectral", "none", ...). ``n_patches`` ... ``icp_iterations``: ``refine_extrinsic``'s; ``stiffness``:
-    ``refine_deform``'s and ``refine_settle``'s (the defaults of ``n_patches``, ``patch_size`` and ``stiffness``: swept
-    by ``python bench/dense_constants.py --seeds 10-13``, docs/dense.md "Tuned constants"). Several initial hypotheses
+    patch-wise rigid ICP, full-resolution ZoomOut, ARAP registration, as ``dense_map``; "+settle" adds ARAP
+    against the surface alone; "extrinsic", "spectral", "none", ...). ``n_patches`` ... ``icp_iterations``:
+    ``refine_extrinsic``'s; ``stiffness``: ``refine_deform``'s and ``refine_settle``'s (the defaults of
+    ``n_patches``, ``patch_size`` and ``stiffness``: swept by ``python bench/dense_constants.py --seeds 10-13``,
+    docs/dense.md "Tuned constants"). Several initial hypotheses
     (``corr.dense_init`` with hypotheses > 1): each is refined and the least distorted result kept
     (``refine.refine_best``). Returns {"vertex_map": (n_template,) int target vertex id (original ids; -1 off the
     template's kept component), "hypothesis": index of the kept initial map (0: the best ranked), "distortions":
@@ -145,7 +146,7 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
     hypothesis = best.index
     if "points" in initial:
         points = np.asarray(initial["points"])
-        if alternative is not None and not is_skipped(alternative) and "vertex_map" in alternative:
+        if holds(alternative, "vertex_map"):
             best = dense.with_alternative(S, T, best, alternative["vertex_map"], *points)
             hypothesis = "alternative" if best.index == 1 else hypothesis
         confidence = dense.points_agreement(T, best.p2p, *points)
@@ -158,8 +159,8 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
 
 def _given_maps(inputs: dict) -> dict:
     """{method: {mesh: (n_template,) int}} of the dense results that have a map."""
-    return {method: {m: np.asarray(r["vertex_map"], np.int64) for m, r in sorted(without_skipped(res).items())
-                     if "vertex_map" in r} for method, res in inputs.items() if res}
+    return {method: {m: np.asarray(r["vertex_map"], np.int64) for m, r in sorted(res.items())
+                     if holds(r, "vertex_map")} for method, res in inputs.items() if res}
 
 
 @register("corr.place_landmarks", group="correspondence", fanout="once", writes_files=True)
@@ -266,8 +267,7 @@ def dense_measures(template_mesh, target_mesh, landmarks, landmark_files=None, g
     """
     name = item_name or os.path.splitext(target_mesh["name"])[0]
     maps = {k: np.asarray(r["vertex_map"], np.int64) for k, r in
-            (("mobius", mobius), ("dense_sparse", dense_sparse), ("dense_auto", dense_auto))
-            if r is not None and not is_skipped(r) and "vertex_map" in r}
+            (("mobius", mobius), ("dense_sparse", dense_sparse), ("dense_auto", dense_auto)) if holds(r, "vertex_map")}
     truth, source = _true_map(template_mesh, target_mesh, ground_truth, name)
     out = {"truth": source} if truth is not None else {"no_truth": source}
     Vt, Ft = np.asarray(target_mesh["V"]), np.asarray(target_mesh["F"])

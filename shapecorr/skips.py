@@ -3,7 +3,7 @@
 A single item of a stage that runs, such as a target mesh without the landmarks ``dense_sparse`` needs, is skipped
 by the stage function itself: its result is ``skipped(why)``, which the engine stores and reports (``run`` prints
 each one). The stages that receive such results read them only through ``is_skipped`` / ``skip_reason`` /
-``skip_reasons`` / ``without_skipped``.
+``skip_reasons`` / ``without_skipped`` / ``holds``.
 """
 from __future__ import annotations
 
@@ -33,3 +33,8 @@ def skip_reasons(results: dict | None) -> dict[str, str]:
 def without_skipped(results: dict | None) -> dict:
     """``results`` ({item: result}, or None) without the skipped ones (an empty dict for None)."""
     return {m: r for m, r in (results or {}).items() if not is_skipped(r)}
+
+
+def holds(result, key: str) -> bool:
+    """Whether ``result`` (one item's result, or None when the input is absent) is a computed result with ``key``."""
+    return result is not None and not is_skipped(result) and key in result

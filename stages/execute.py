@@ -103,9 +103,9 @@ DASHBOARD_ADDRESS = "127.0.0.1:0"  # this machine only, a free port (see docs/sc
 
 # The environment of the local worker processes: one BLAS/OpenMP thread each (a task is one thread), and *not*
 # dask's default MALLOC_TRIM_THRESHOLD_=65536: with it glibc stops adapting its mmap threshold, every array above
-# 128 KB is mapped and unmapped afresh, and numpy-heavy tasks ran 2-3x slower in a worker than in a plain
-# process (`python bench/worker_env.py`: see docs/engine.md "Execution"). Memory freed by a task is then kept by
-# the worker process for the next task instead of being returned to the system at once.
+# 128 KB is mapped and unmapped afresh, and numpy-heavy tasks ran 1.4x (a dense map) to 5x (Möbius scoring) slower
+# in a worker than in a plain process (`python bench/worker_env.py`: see docs/engine.md "Execution"). Memory
+# freed by a task is then kept by the worker process for the next task instead of being returned to the system.
 WORKER_ENVIRON = {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1}
 
 

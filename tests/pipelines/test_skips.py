@@ -28,3 +28,11 @@ def test_only_the_engines_skipped_value_is_skipped():
     assert not is_skipped({"skipped": "a result that happens to have this key"})
     assert without_skipped({"a": skipped("why"), "b": {"all": 1}}) == {"b": {"all": 1}}
     assert without_skipped(None) == {}
+
+
+def test_holds_is_true_only_for_a_computed_result_with_the_key():
+    from shapecorr.skips import holds
+
+    assert holds({"vertex_map": np.arange(3)}, "vertex_map")
+    assert not holds({"no_truth": "why"}, "vertex_map") and not holds(None, "vertex_map")
+    assert not holds(skipped("mesh002: no landmarks"), "vertex_map")
