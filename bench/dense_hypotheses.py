@@ -64,30 +64,39 @@ def score_candidates(S, T, V_t, F_t, truth, landmarks, n_candidates: int) -> lis
     solver = GeodesicSolver(V_t, F_t)
     rows = []
     for c, (C, p2p) in zip(ranked, maps):
-        refined = refine.refine_map(S, T, upsample_spectral(S, T, C, p2p), refine.DEFAULT_REFINE,
-                                    {"extrinsic": {"n_patches": SETTINGS["n_patches"]}})
+        refined = upsample_spectral(S, T, C, p2p)
+        step_distortions = [refine.map_distortion(S, T, refined)]          # after upsampling, then each step
+        for step in refine.refine_plan(refine.DEFAULT_REFINE, {"extrinsic": {"n_patches": SETTINGS["n_patches"]}}):
+            refined = step.run(S, T, refined)
+            step_distortions.append(refine.map_distortion(S, T, refined))
         vertex_map = map_to_original(S, T, refined)
         errors = measures.dense_errors(V_t, F_t, {"m": vertex_map}, truth,
                                        vertices=S.vids[S.samples[:SETTINGS["eval_vertices"]]], solver=solver)["m"]
         _, nearest = measures.landmark_errors(V_t, F_t, transfer_landmarks(vertex_map, landmarks),
                                               truth[landmarks], solver=solver)
-        rows.append({"chirality": c.chirality, "wks": c.wks, "distortion": refine.map_distortion(S, T, refined),
+        rows.append({"chirality": c.chirality, "wks": c.wks, "distortion": step_distortions[-1],
+                     "step_distortions": step_distortions,
                      "mean_error": float(errors.mean()), "landmark_accuracy": measures.landmark_accuracy(nearest)})
     return rows
 
 
 def choice(rows: list[dict]) -> dict:
-    """What the automatic mode does with these scored candidates: how many it refines, which it keeps, its
-    confidence, and whether that map is right (landmark accuracy >= 0.5)."""
+    """What the automatic mode does with these scored candidates: how many it refines, which of them it drops
+    after the first step (``refine.surviving_hypotheses``), which it keeps, its confidence, and whether that map
+    is right (landmark accuracy >= 0.5). Rows of a file without ``step_distortions`` count as never dropped."""
     from corr_core.correspondence.dense.init import hypotheses_to_refine
-    from corr_core.correspondence.dense.refine import BestMap
+    from corr_core.correspondence.dense.refine import BestMap, surviving_hypotheses
 
     n = hypotheses_to_refine([r["chirality"] for r in rows], [r["wks"] for r in rows])
-    best = BestMap(np.zeros(0, dtype=np.int64), int(np.argmin([r["distortion"] for r in rows[:n]])),
-                   tuple(r["distortion"] for r in rows[:n]))
+    first = tuple(r.get("step_distortions", [None, r["distortion"]])[1] for r in rows[:n])
+    alive = surviving_hypotheses(first)
+    final = tuple(r["distortion"] if i in alive else first[i] for i, r in enumerate(rows[:n]))
+    dropped = tuple(i not in alive for i in range(n))
+    best = BestMap(np.zeros(0, dtype=np.int64), min(alive, key=lambda i: (final[i], i)), final,
+                   dropped if any(dropped) else (), first if any(dropped) else ())
     kept = rows[best.index]
-    return {"refined": n, "kept": best.index, "confidence": best.confidence, "margin": best.margin,
-            "right": kept["landmark_accuracy"] >= 0.5, "mean_error": kept["mean_error"]}
+    return {"refined": n, "dropped": int(sum(dropped)), "kept": best.index, "confidence": best.confidence,
+            "margin": best.margin, "right": kept["landmark_accuracy"] >= 0.5, "mean_error": kept["mean_error"]}
 
 
 def generated_targets(root: str, decimated: bool):
@@ -136,22 +145,25 @@ def main(argv=None) -> int:
                 continue
             T = basis.mesh_basis(V_t, F_t, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
             rows = score_candidates(S, T, V_t, F_t, truth, landmarks, args.candidates)
+            results.append({"seed": seed, "mesh": name, "n_vertices": len(V_t), "candidates": rows})
             c = choice(rows)
-            results.append({"seed": seed, "mesh": name, "n_vertices": len(V_t), "candidates": rows, **c})
             cells = "  ".join(f"[{i}] chir {r['chirality']:.2f} wks {r['wks']:.4f} dist {r['distortion']:.4f} "
                               f"err {r['mean_error']:.4f} acc {r['landmark_accuracy']:.2f}"
                               for i, r in enumerate(rows))
-            print(f"seed {seed} {name} ({len(V_t)} v): refined {c['refined']}, kept [{c['kept']}] "
+            print(f"seed {seed} {name} ({len(V_t)} v): refined {c['refined']} (dropped {c['dropped']}), kept [{c['kept']}] "
                   f"{'right' if c['right'] else 'FLIPPED'}, confidence {c['confidence']:.2f} "
                   f"(margin {c['margin']:.3f})  |  {cells}", flush=True)
             if args.json:
                 with open(args.json, "w") as fh:
                     json.dump(results, fh, indent=1)
+    results = [{**r, **choice(r["candidates"])} for r in results]   # the choice as today's code makes it
     right = [r for r in results if r["right"]]
     wrong = [r for r in results if not r["right"]]
     flipped = ", ".join(f"seed {r['seed']} {r['mesh']}" for r in wrong) or "none"
     print(f"\n{len(results)} targets, seeds {args.seeds}: {len(wrong)} flipped ({flipped}); mean error of the kept "
           f"maps {np.mean([r['mean_error'] for r in results]):.4f}")
+    print(f"hypotheses refined: {sum(r['refined'] for r in results)}, of which dropped after the first step: "
+          f"{sum(r['dropped'] for r in results)} (of the {sum(r['refined'] - 1 for r in results)} not kept)")
     if right:
         margins = sorted(r["margin"] for r in right)
         print(f"right choices: margin min {margins[0]:.3f}, 10th percentile {np.percentile(margins, 10):.3f}, "

@@ -171,6 +171,38 @@ def test_confidence_is_low_when_two_hypotheses_refine_alike_and_nan_for_one():
     assert np.isnan(BestMap(p2p, 0, (0.2,)).confidence)
 
 
+def test_refine_best_drops_a_hypothesis_surely_beaten_after_the_first_step(pair, monkeypatch):
+    from corr_core.correspondence.dense import refine
+
+    S, T = pair
+    truth, turned = np.arange(S.n), _turned_map(S, T)
+    later = []
+    monkeypatch.setitem(refine.REFINE_STEPS, "first", lambda source, target, p2p: p2p)
+    monkeypatch.setitem(refine.REFINE_STEPS, "later", lambda source, target, p2p: later.append(p2p) or p2p)
+    d_truth, d_turned = refine.map_distortion(S, T, truth), refine.map_distortion(S, T, turned)
+    assert d_turned > (1 + refine.CONFIDENT_MARGIN) * d_truth                  # the fixture's turn: surely beaten
+    best = refine.refine_best(S, T, [turned, truth], ["first", "later"])
+    assert best.index == 1 and len(later) == 1 and np.array_equal(later[0], truth)   # the turn got no later step
+    assert best.dropped == (True, False) and best.first_step == (d_turned, d_truth)
+    assert best.margin == pytest.approx((d_turned - d_truth) / d_truth) and best.confidence == 1.0
+    later.clear()
+    close = refine.refine_best(S, T, [truth, truth.copy()], ["first", "later"])   # a tie: both refined to the end
+    assert len(later) == 2 and close.dropped == () and close.confidence == 0.0
+    later.clear()
+    single = refine.refine_best(S, T, [turned], ["first", "later"])          # one hypothesis: every step
+    assert len(later) == 1 and single.distortions == (d_turned,)
+
+
+def test_surviving_hypotheses_and_the_margin_of_a_dropped_one():
+    from corr_core.correspondence.dense import BestMap, surviving_hypotheses
+
+    assert surviving_hypotheses([0.2, 0.219, 0.221, float("inf")]) == [0, 1]
+    assert surviving_hypotheses([float("inf"), float("inf")]) == [0, 1]      # nothing to tell them apart
+    p2p = np.zeros(3, dtype=np.int64)
+    dropped = BestMap(p2p, 0, (0.20, 0.26), dropped=(False, True), first_step=(0.25, 0.26))
+    assert dropped.margin == pytest.approx(0.04) and dropped.confidence == pytest.approx(0.4)   # same-step compare
+
+
 def test_points_agreement_counts_the_given_points_a_map_keeps(pair):
     from corr_core.correspondence.dense import points_agreement
 
