@@ -111,7 +111,24 @@ def dense_init(template_basis, target_basis, template_mesh, target_mesh, landmar
     return {"C": C, "p2p_samples": p2p, "mode": mode, "points": points}
 
 
-@register("corr.dense_refine", group="correspondence", fanout="item")
+def _refine_plan(*, refine, n_patches: int, patch_size: int, rounds: int, icp_iterations: int,
+                 stiffness: float) -> tuple:
+    """``corr.dense_refine``'s params as typed refinement steps (``refine.refine_plan``; ValueError names a
+    misspelt step or option)."""
+    extrinsic = {"n_patches": n_patches, "patch_size": patch_size, "rounds": rounds, "icp_iterations": icp_iterations}
+    return dense.refine_plan(refine, {"extrinsic": extrinsic, "deform": {"stiffness": stiffness},
+                                      "settle": {"stiffness": stiffness}})
+
+
+def _check_refine(**params) -> None:
+    """``corr.dense_refine``'s check when the pipeline is read: the refinement plan must name known steps."""
+    try:
+        _refine_plan(**params)
+    except ValueError as e:
+        raise ValueError(f"parameter 'refine' = {params['refine']!r}: {e}") from None
+
+
+@register("corr.dense_refine", group="correspondence", fanout="item", validate=_check_refine)
 def dense_refine(template_basis, target_basis, initial, alternative=None, *,
                  refine: str | list[str] = dense.DEFAULT_REFINE,
                  n_patches: int = 300,
@@ -140,9 +157,8 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
     if "C_more" in initial:
         starts += list(zip(np.asarray(initial["C_more"]), np.asarray(initial["p2p_samples_more"])))
     maps = [dense.upsample_spectral(S, T, np.asarray(C), np.asarray(p2p)) for C, p2p in starts]
-    extrinsic = {"n_patches": n_patches, "patch_size": patch_size, "rounds": rounds, "icp_iterations": icp_iterations}
-    plan = dense.refine_plan(refine, {"extrinsic": extrinsic, "deform": {"stiffness": stiffness},
-                                      "settle": {"stiffness": stiffness}})
+    plan = _refine_plan(refine=refine, n_patches=n_patches, patch_size=patch_size, rounds=rounds,
+                        icp_iterations=icp_iterations, stiffness=stiffness)
     best = dense.refine_best(S, T, maps, plan)
     hypothesis = best.index
     if "points" in initial:

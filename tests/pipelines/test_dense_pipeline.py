@@ -328,6 +328,19 @@ def test_generator_params_are_checked():
         _check_humanoid(n_poses=1, seed=0, remeshed=["decimated", "decimated"])
 
 
+def test_a_misspelt_refinement_is_a_configuration_error_before_anything_runs(tmp_path):
+    """The refinement plan is checked when the pipeline is read (``register(validate=...)``), so ``--dry-run``
+    names a misspelt step; it used to fail every item of the stage at run time."""
+    with pytest.raises(PipelineError, match=r"stages\.dense_auto\.params: parameter 'refine' = 'extrinsic\+smoth': "
+                                            r"unknown refinement step 'smoth'"):
+        api.plan_pipeline(str(ROOT / "pipeline.yaml"), ["dense_auto.refine=extrinsic+smoth"],
+                          cache_dir=str(tmp_path / "c"))
+    with pytest.raises(PipelineError, match=r"parameter 'refine' = \['extrinsic', 'deforn'\]: unknown refinement "
+                                            r"step 'deforn'"):
+        api.plan_pipeline(str(ROOT / "pipeline.yaml"), ["dense_sparse.refine=[extrinsic, deforn]"],
+                          cache_dir=str(tmp_path / "c"))
+
+
 def test_dense_auto_init_on_a_two_triangle_mesh_names_the_file(tmp_path):
     """A target of two triangles has too few extremities for the automatic initialisation: the error names the
     target's file and item (it said only "need at least 3 feature points on each mesh, got 5 and 2")."""
