@@ -31,7 +31,7 @@ seconds over each pyFM mode's.
 The summary also lists the flipped targets (landmark accuracy < 0.5: a mirrored or turned map) of each method.
 
 Run:  python bench/correspondence.py [--data SCAPE] [--pairs N] [--json OUT]
-                                     [--methods pyfm_none,pyfm_5pts,dense_sparse,dense_auto]
+                                     [--methods pyfm_none,pyfm_5pts,dense_sparse,dense_auto] [--refine PLAN]
       python bench/correspondence.py --summarize OUT.json [OUT2.json ...] [--relative-to BASE.json ...]
           (the table of saved, possibly partial, runs; several files: their methods side by side on the pairs they
           share, e.g. the project's methods and pyFM run one after the other, the CPU-time ratios then compare two
@@ -271,6 +271,8 @@ def main(argv=None) -> int:
     ap.add_argument("--pairs", type=int, default=None, help="only the first N test meshes")
     ap.add_argument("--methods", default=",".join(METHODS))
     ap.add_argument("--eval-vertices", type=int, default=2000, help="farthest-point template vertices evaluated")
+    ap.add_argument("--refine", default=None, help="the dense methods' refinement plan (refine.refine_plan, e.g. "
+                    "extrinsic+deform; default: dense_map's)")
     ap.add_argument("--json", default=None, help="write per-pair and summary results here")
     ap.add_argument("--summarize", default=None, nargs="+", metavar="JSON",
                     help="only print the table of --json files (several: merged on their common pairs)")
@@ -288,6 +290,7 @@ def main(argv=None) -> int:
     from corr_core.geometry.geodesic import GeodesicSolver
     from corr_core.geometry.mesh_io import load_mesh
 
+    plan = {} if args.refine is None else {"refine": args.refine}
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     unknown = sorted(set(methods) - set(METHODS))
     if unknown:
@@ -333,9 +336,9 @@ def main(argv=None) -> int:
                 T = dense_basis.mesh_basis(Vt, Ft, k=100, name=path)
                 if m == "dense_sparse":
                     maps[m] = dense_map(Vs, Fs, Vt, Ft, sparse[:, 0], sparse[:, 1], basis_template=S,
-                                        basis_target=T, alternative=maps.get("dense_auto"))
+                                        basis_target=T, alternative=maps.get("dense_auto"), **plan)
                 else:
-                    maps[m] = dense_map(Vs, Fs, Vt, Ft, basis_template=S, basis_target=T)
+                    maps[m] = dense_map(Vs, Fs, Vt, Ft, basis_template=S, basis_target=T, **plan)
             seconds[m] = time.process_time() - t0
         solver = GeodesicSolver(Vt, Ft)
         errs = measures.dense_errors(Vt, Ft, maps, given["truth"], vertices=eval_vertices, solver=solver)

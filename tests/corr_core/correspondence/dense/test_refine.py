@@ -171,6 +171,22 @@ def test_confidence_is_low_when_two_hypotheses_refine_alike_and_nan_for_one():
     assert np.isnan(BestMap(p2p, 0, (0.2,)).confidence)
 
 
+def test_a_step_written_with_a_question_mark_is_kept_only_where_it_lowers_the_distortion(pair, monkeypatch):
+    from corr_core.correspondence.dense import refine
+
+    S, T = pair
+    truth, turned = np.arange(S.n), _turned_map(S, T)
+    monkeypatch.setitem(refine.REFINE_STEPS, "to_turn", lambda source, target, p2p: turned)
+    monkeypatch.setitem(refine.REFINE_STEPS, "to_truth", lambda source, target, p2p: truth)
+    guarded, plain = refine.refine_plan("to_turn?+to_truth?"), refine.refine_plan(["to_turn"])
+    assert [(s.name, s.only_if_lower) for s in guarded] == [("to_turn", True), ("to_truth", True)]
+    assert guarded == refine.refine_plan([refine.RefineStep("to_turn", only_if_lower=True), "to_truth?"])
+    assert np.array_equal(refine.refine_map(S, T, truth, guarded[:1]), truth)     # more distorted: not taken
+    assert np.array_equal(refine.refine_map(S, T, truth, plain), turned)          # without "?": taken
+    assert np.array_equal(refine.refine_map(S, T, turned, guarded[1:]), truth)    # less distorted: taken
+    assert refine.DEFAULT_REFINE == "extrinsic+spectral?+deform"
+
+
 def test_refine_best_drops_a_hypothesis_surely_beaten_after_the_first_step(pair, monkeypatch):
     from corr_core.correspondence.dense import refine
 
