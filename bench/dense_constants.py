@@ -44,7 +44,7 @@ import numpy as np  # noqa: E402
 from bench.dense_hypotheses import SETTINGS, generated_targets, resumed_results, seed_range  # noqa: E402
 
 DEFAULTS = {"chirality": 0.3, "stiffness": 0.03, "n_patches": SETTINGS["n_patches"], "patch_size": 64}
-BEFORE_DEFORM = "extrinsic+spectral?"
+BEFORE_DEFORM = "extrinsic+spectral"
 
 
 def check_defaults() -> None:

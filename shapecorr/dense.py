@@ -134,9 +134,9 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
                  n_patches: int = 300,
                  patch_size: int = 64, rounds: int = 5, icp_iterations: int = 6, stiffness: float = 0.03) -> dict:
     """The dense map: the initial map upsampled to every template vertex (``upsample_spectral``), then refined
-    (``refine``: steps of ``refine.refine_plan``, joined by "+" or as a list; "extrinsic+spectral?+deform" =
-    patch-wise rigid ICP, full-resolution ZoomOut kept where it lowers the distortion ("?"), ARAP registration,
-    as ``dense_map``; "+settle" adds ARAP against the surface alone; "extrinsic", "spectral", "none", ...). ``n_patches`` ... ``icp_iterations``:
+    (``refine``: steps of ``refine.refine_plan``, joined by "+" or as a list; "extrinsic+spectral+deform" =
+    patch-wise rigid ICP, full-resolution ZoomOut, ARAP registration, as ``dense_map`` ("spectral?": a step kept
+    only where it lowers the distortion); "+settle" adds ARAP against the surface alone; "extrinsic", "spectral", "none", ...). ``n_patches`` ... ``icp_iterations``:
     ``refine_extrinsic``'s; ``stiffness``: ``refine_deform``'s and ``refine_settle``'s (the defaults of
     ``n_patches``, ``patch_size`` and ``stiffness``: swept by ``python bench/dense_constants.py --seeds 10-13``,
     docs/dense.md "Tuned constants"). Several initial hypotheses

@@ -8,7 +8,7 @@ Steps (each callable on its own; see the modules):
   3. ``refine.upsample_spectral`` (every template vertex), then pointwise steps below ZoomOut's floor:
      ``refine.refine_extrinsic`` (patch-wise rigid ICP: robust patch fits, normal-compatible nearest vertices
      anywhere on the target, so twisted or slid regions come back) then ``refine.refine_spectral``
-     (full-resolution ZoomOut with local candidates; kept only where it lowers ``refine.map_distortion``) then ``deform.refine_deform`` (as-rigid-as-possible
+     (full-resolution ZoomOut with local candidates) then ``deform.refine_deform`` (as-rigid-as-possible
      registration of the template onto the target, read back as nearest vertices) by default;
      ``deform.refine_settle`` (the same registration without the pull toward the current images) and
      ``refine.refine_geodesic`` on request. The steps share ``nearest.nearest_compatible`` (the nearest target
@@ -53,8 +53,8 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
             landmarks) or both None for the automatic map (no point needed on either mesh).
         k: final spectral basis size (ZoomOut end); k_init: size of the initial functional map.
         refine: pointwise steps after ZoomOut, applied in the order named (``refine.refine_plan``):
-            "extrinsic+spectral?+deform" (default: ``refine_extrinsic``, ``refine_spectral`` where it lowers the
-            distortion, then ``refine_deform``), "extrinsic", "spectral", "deform", "settle" (``refine_settle``, on request),
+            "extrinsic+spectral+deform" (default: ``refine_extrinsic``, ``refine_spectral``, then
+            ``refine_deform``), a step followed by "?" kept only where it lowers the distortion, "extrinsic", "spectral", "deform", "settle" (``refine_settle``, on request),
             "geodesic" (``refine_geodesic``), any of them joined by "+", a list of names or ``RefineStep``s
             (``RefineStep("deform", {"stiffness": 0.02})``), or None.
         basis_template, basis_target: precomputed ``mesh_basis`` results (reuse them across pairs).

@@ -267,12 +267,10 @@ def _assign(tree: cKDTree, target: MeshBasis, p2p: np.ndarray, moved: np.ndarray
 
 
 
-# The default plan. "spectral?": the full-resolution ZoomOut step is kept only where it lowers the map's
-# distortion. `python bench/refine_plans.py --seeds 10-13` (generated other bodies, 28 targets, from the sparse
-# points; docs/dense.md "Refinement plan") printed mean errors 0.01364 with "extrinsic+spectral+deform" and
-# 0.01126 with this plan (lower on 24, higher on 1); the spectral step raised the distortion of most of those
-# maps (bodies of other people are not isometric to the template, and it pulls toward an isometric map).
-DEFAULT_REFINE = "extrinsic+spectral?+deform"
+# The default plan. On bodies of other people "extrinsic+spectral?+deform" (the spectral step kept only where it
+# lowers the distortion) or "extrinsic+deform" are more accurate, on poses of one body less: docs/dense.md
+# "Refinement plan" (`python bench/refine_plans.py --seeds 10-13` and the pipelines' results).
+DEFAULT_REFINE = "extrinsic+spectral+deform"
 _MAP_ARGUMENTS = ("source", "target", "p2p")          # what refine_map passes to every step itself
 ONLY_IF_LOWER = "?"                                    # a step's name ending so: kept only where it lowers distortion
 
@@ -348,7 +346,7 @@ def refine_plan(refine: str | Sequence | None = DEFAULT_REFINE,
 def refine_map(source: MeshBasis, target: MeshBasis, p2p: np.ndarray,
                refine: str | Sequence | None = DEFAULT_REFINE, options: Mapping | None = None) -> np.ndarray:
     """The pointwise refinements of ``refine_plan(refine, options)``, in order (``DEFAULT_REFINE``
-    "extrinsic+spectral?+deform" is the default of ``dense_map`` and of the ``corr.dense_refine`` stage).
+    "extrinsic+spectral+deform" is the default of ``dense_map`` and of the ``corr.dense_refine`` stage).
 
     Args: source, target: bases; p2p: (n_s,) int current map (local ids); refine, options: as ``refine_plan``.
     Returns: (n_s,) int refined map.

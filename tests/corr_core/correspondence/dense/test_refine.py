@@ -184,7 +184,6 @@ def test_a_step_written_with_a_question_mark_is_kept_only_where_it_lowers_the_di
     assert np.array_equal(refine.refine_map(S, T, truth, guarded[:1]), truth)     # more distorted: not taken
     assert np.array_equal(refine.refine_map(S, T, truth, plain), turned)          # without "?": taken
     assert np.array_equal(refine.refine_map(S, T, turned, guarded[1:]), truth)    # less distorted: taken
-    assert refine.DEFAULT_REFINE == "extrinsic+spectral?+deform"
 
 
 def test_refine_best_drops_a_hypothesis_surely_beaten_after_the_first_step(pair, monkeypatch):
