@@ -12,6 +12,7 @@ accuracy (< 0.5: a flipped map). The summary: targets, flips of the map ``refine
 hypotheses ``hypotheses_to_refine`` selects, its confidence, and the smallest margin of a right choice.
 
 Run:  python bench/dense_hypotheses.py [--seeds 0-9] [--poses 6] [--decimated] [--meshes mesh007] [--json OUT]
+          [--refine extrinsic+deform]  (another refinement plan than the default)
       (an existing --json file is resumed: its targets are not run again, and the summary covers all of them)
 """
 from __future__ import annotations
@@ -51,7 +52,7 @@ def resumed_results(path: str | None, seeds: list[int] | None = None) -> list[di
         return [r for r in json.load(fh) if seeds is None or r["seed"] in seeds]
 
 
-def score_candidates(S, T, V_t, F_t, truth, landmarks, n_candidates: int) -> list[dict]:
+def score_candidates(S, T, V_t, F_t, truth, landmarks, n_candidates: int, plan: str | None = None) -> list[dict]:
     """Every one of the ``n_candidates`` best ranked starting maps, refined and scored (module docstring)."""
     from corr_core.correspondence.dense import init, measures, refine, upsample_spectral
     from corr_core.correspondence.dense.basis import map_to_original
@@ -66,7 +67,8 @@ def score_candidates(S, T, V_t, F_t, truth, landmarks, n_candidates: int) -> lis
     for c, (C, p2p) in zip(ranked, maps):
         refined = upsample_spectral(S, T, C, p2p)
         step_distortions = [refine.map_distortion(S, T, refined)]          # after upsampling, then each step
-        for step in refine.refine_plan(refine.DEFAULT_REFINE, {"extrinsic": {"n_patches": SETTINGS["n_patches"]}}):
+        steps = refine.refine_plan(plan or refine.DEFAULT_REFINE, {"extrinsic": {"n_patches": SETTINGS["n_patches"]}})
+        for step in steps:
             refined = step.run(S, T, refined)
             step_distortions.append(refine.map_distortion(S, T, refined))
         vertex_map = map_to_original(S, T, refined)
@@ -99,6 +101,27 @@ def choice(rows: list[dict]) -> dict:
             "margin": best.margin, "right": kept["landmark_accuracy"] >= 0.5, "mean_error": kept["mean_error"]}
 
 
+def first_step_line(results: list[dict]) -> None:
+    """Print how well the distortion after the first refinement step already tells the right map (the least
+    distorted right one among the refined hypotheses) from the others: on how many targets it is the least
+    distorted, and the others' excess over it (the ground of ``refine.surviving_hypotheses``)."""
+    least, excess, counted = 0, [], 0
+    for r in results:
+        refined = r["candidates"][:r["refined"]]
+        right = [i for i, c in enumerate(refined) if c["landmark_accuracy"] >= 0.5]
+        if not right or len(refined) < 2 or any("step_distortions" not in c for c in refined):
+            continue
+        kept = min(right, key=lambda i: refined[i]["distortion"])
+        first = [c["step_distortions"][1] for c in refined]
+        counted += 1
+        least += first[kept] == min(first)
+        excess += [first[i] / first[kept] - 1 for i in range(len(refined)) if i != kept]
+    if counted:
+        print(f"after the first step: the right map the least distorted on {least} of {counted} targets; the "
+              f"others' distortion above it by {min(excess):.1%} to {max(excess):.1%} (median "
+              f"{np.median(excess):.1%})")
+
+
 def generated_targets(root: str, decimated: bool):
     """(name, V, F, truth (n_template,) int) of every test mesh of a generated dataset."""
     from corr_core.geometry.mesh_io import load_mesh
@@ -120,6 +143,7 @@ def main(argv=None) -> int:
     ap.add_argument("--decimated", action="store_true", help="also a decimated, shuffled copy of pose 1")
     ap.add_argument("--meshes", default=None, help="only these test meshes, e.g. mesh007 (comma-separated names)")
     ap.add_argument("--work", default=None, help="folder for the generated data (default: a temporary one)")
+    ap.add_argument("--refine", default=None, help="refinement plan (default: refine.DEFAULT_REFINE)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
 
@@ -144,13 +168,14 @@ def main(argv=None) -> int:
             if (seed, name) in done or (args.meshes and name not in args.meshes.split(",")):
                 continue
             T = basis.mesh_basis(V_t, F_t, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
-            rows = score_candidates(S, T, V_t, F_t, truth, landmarks, args.candidates)
+            rows = score_candidates(S, T, V_t, F_t, truth, landmarks, args.candidates, args.refine)
             results.append({"seed": seed, "mesh": name, "n_vertices": len(V_t), "candidates": rows})
             c = choice(rows)
             cells = "  ".join(f"[{i}] chir {r['chirality']:.2f} wks {r['wks']:.4f} dist {r['distortion']:.4f} "
                               f"err {r['mean_error']:.4f} acc {r['landmark_accuracy']:.2f}"
                               for i, r in enumerate(rows))
-            print(f"seed {seed} {name} ({len(V_t)} v): refined {c['refined']} (dropped {c['dropped']}), kept [{c['kept']}] "
+            print(f"seed {seed} {name} ({len(V_t)} v): refined {c['refined']} (dropped {c['dropped']}), "
+                  f"kept [{c['kept']}] "
                   f"{'right' if c['right'] else 'FLIPPED'}, confidence {c['confidence']:.2f} "
                   f"(margin {c['margin']:.3f})  |  {cells}", flush=True)
             if args.json:
@@ -164,6 +189,7 @@ def main(argv=None) -> int:
           f"maps {np.mean([r['mean_error'] for r in results]):.4f}")
     print(f"hypotheses refined: {sum(r['refined'] for r in results)}, of which dropped after the first step: "
           f"{sum(r['dropped'] for r in results)} (of the {sum(r['refined'] - 1 for r in results)} not kept)")
+    first_step_line(results)
     if right:
         margins = sorted(r["margin"] for r in right)
         print(f"right choices: margin min {margins[0]:.3f}, 10th percentile {np.percentile(margins, 10):.3f}, "

@@ -135,21 +135,22 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
                  patch_size: int = 64, rounds: int = 5, icp_iterations: int = 6, stiffness: float = 0.03) -> dict:
     """The dense map: the initial map upsampled to every template vertex (``upsample_spectral``), then refined
     (``refine``: steps of ``refine.refine_plan``, joined by "+" or as a list; "extrinsic+spectral+deform" =
-    patch-wise rigid ICP, full-resolution ZoomOut, ARAP registration, as ``dense_map`` ("spectral?": a step kept
-    only where it lowers the distortion); "+settle" adds ARAP against the surface alone; "extrinsic", "spectral", "none", ...). ``n_patches`` ... ``icp_iterations``:
-    ``refine_extrinsic``'s; ``stiffness``: ``refine_deform``'s and ``refine_settle``'s (the defaults of
-    ``n_patches``, ``patch_size`` and ``stiffness``: swept by ``python bench/dense_constants.py --seeds 10-13``,
-    docs/dense.md "Tuned constants"). Several initial hypotheses
-    (``corr.dense_init`` with hypotheses > 1): each gets the first step, those then surely beaten are dropped, the
-    others are refined to the end and the least distorted result kept (``refine.refine_best``). Returns
-    {"vertex_map": (n_template,) int target vertex id (original ids; -1 off the template's kept component),
-    "hypothesis": index of the kept initial map (0: the best ranked), "distortions": (h,) ``map_distortion`` of
-    every hypothesis after the last step it got, "dropped": (h,) bool, dropped after the first step, "confidence": float in [0, 1], no ground truth needed
-    (several hypotheses: ``BestMap.confidence``, the kept map's distortion margin over the runner-up; given
-    points: ``points_agreement``, the fraction of them the map keeps; absent with a single automatic
-    hypothesis)} or ``skips.skipped(why)``. With given points and an ``alternative`` (another ``corr.dense_refine``
-    result of the same pair, e.g. dense_auto's), that map is kept instead when it keeps the given points and is
-    less distorted (``refine.best_with_points``; "hypothesis": "alternative"): points never make a map worse."""
+    patch-wise rigid ICP, full-resolution ZoomOut, ARAP registration, as ``dense_map``; a step written "spectral?"
+    is kept only where it lowers the distortion; "+settle" adds ARAP against the surface alone; "extrinsic",
+    "spectral", "none", ...). ``n_patches`` ... ``icp_iterations``: ``refine_extrinsic``'s; ``stiffness``:
+    ``refine_deform``'s and ``refine_settle``'s (the defaults of ``n_patches``, ``patch_size`` and ``stiffness``:
+    swept by ``python bench/dense_constants.py --seeds 10-13``, docs/dense.md "Tuned constants"). Several initial
+    hypotheses (``corr.dense_init`` with hypotheses > 1): each gets the first step, those then surely beaten are
+    dropped, the others are refined to the end and the least distorted result kept (``refine.refine_best``).
+    Returns {"vertex_map": (n_template,) int target vertex id (original ids; -1 off the template's kept
+    component), "hypothesis": index of the kept initial map (0: the best ranked), "distortions": (h,)
+    ``map_distortion`` of every hypothesis after the last step it got, "dropped": (h,) bool, dropped after the
+    first step, "confidence": float in [0, 1], no ground truth needed (several hypotheses: ``BestMap.confidence``,
+    the kept map's distortion margin over the runner-up; given points: ``points_agreement``, the fraction of them
+    the map keeps; absent with a single automatic hypothesis)} or ``skips.skipped(why)``. With given points and an
+    ``alternative`` (another ``corr.dense_refine`` result of the same pair, e.g. dense_auto's), that map is kept
+    instead when it keeps the given points and is less distorted (``refine.best_with_points``; "hypothesis":
+    "alternative"): points never make a map worse."""
     if is_skipped(initial):
         return skipped(skip_reason(initial))
     S, T = _basis(template_basis, "template"), _basis(target_basis, "target")

@@ -64,7 +64,7 @@ def _rays(view: int, n_views: int, size: int, elevation_deg: float):
 
 
 def render_colored(V: np.ndarray, F: np.ndarray, colors: np.ndarray, *, view: int = 0, n_views: int = 8,
-                   size: int = 320, elevation_deg: float = 10.0, ambient: float = 0.35) -> np.ndarray:
+                   size: int = 320, elevation_deg: float = 10.0, ambient: float = 0.35, scene=None) -> np.ndarray:
     """Render a normalised mesh with per-vertex colours (interpolated over each triangle), headlight shading.
 
     Args:
@@ -72,13 +72,14 @@ def render_colored(V: np.ndarray, F: np.ndarray, colors: np.ndarray, *, view: in
         colors: (n,3) float RGB in [0,1] per vertex.
         view, n_views, elevation_deg: the camera (view k of ``camera_frames(n_views, elevation_deg)``).
         size: pixels per side; ambient: shade = ambient + (1 - ambient) * |n . d|.
+        scene: the mesh's ray-casting scene when already built (``_scene(V, F)``; reused for several pictures).
     Returns:
         (size, size, 3) float32 RGB in [0, 1], white background.
     """
     V, F, colors = np.asarray(V, np.float64), np.asarray(F, np.int64), np.asarray(colors, np.float64)
     if colors.shape != (len(V), 3):
         raise ValueError(f"colors must be (n_vertices, 3) = ({len(V)}, 3), got {colors.shape}")
-    hit = _scene(V, F).cast_rays(_rays(view, n_views, size, elevation_deg))
+    hit = (scene or _scene(V, F)).cast_rays(_rays(view, n_views, size, elevation_deg))
     face = hit["primitive_ids"].numpy().astype(np.int64)
     uv = hit["primitive_uvs"].numpy()
     valid = np.isfinite(hit["t_hit"].numpy())
@@ -93,9 +94,9 @@ def render_colored(V: np.ndarray, F: np.ndarray, colors: np.ndarray, *, view: in
 
 
 def project_vertices(V: np.ndarray, F: np.ndarray, vids: np.ndarray, *, view: int = 0, n_views: int = 8,
-                     size: int = 320, elevation_deg: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
+                     size: int = 320, elevation_deg: float = 10.0, scene=None) -> tuple[np.ndarray, np.ndarray]:
     """Pixel positions of vertices ``vids`` (k,) in the picture of :func:`render_colored`, and whether each is
-    visible (not hidden by the surface).
+    visible (not hidden by the surface). ``scene``: as :func:`render_colored`'s.
 
     Returns (xy (k,2) float pixel column/row, visible (k,) bool)."""
     V = np.asarray(V, np.float64)
@@ -106,7 +107,7 @@ def project_vertices(V: np.ndarray, F: np.ndarray, vids: np.ndarray, *, view: in
     o3d = load_open3d()
     origins = P + 3.0 * back
     rays = np.concatenate([origins, np.broadcast_to(-back, origins.shape)], axis=1).astype(np.float32)
-    t_hit = _scene(V, F).cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+    t_hit = (scene or _scene(V, F)).cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
     return xy, t_hit >= 3.0 - 0.02
 
 
@@ -274,7 +275,8 @@ def _label_points(fig, ax, xy: np.ndarray, texts: list[str], colours: list[str],
 
 def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, predictions: dict,
                          names: list[str], title: str, path, views: tuple[int, ...] = (0, 1), *, n_views: int = 8,
-                         size: int = 300, wrap: int | None = None, legend: bool = True) -> dict:
+                         size: int = 300, wrap: int | None = None, legend: bool = True,
+                         pictures: dict | None = None) -> dict:
     """The template and some test poses side by side with the landmarks as numbered dots.
 
     Args:
@@ -287,22 +289,32 @@ def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, pred
         views: the cameras shown (rows, each named on the left).
         wrap: with one view, at most this many panels per row (the panels wrap onto more rows).
         legend: list the numbered landmark names next to the panels.
+        pictures: a dict kept by the caller across figures of the same meshes: each mesh's ray-casting scene and
+            grey picture per camera are made once (keyed by the arrays' identity, so only while they live).
     Writes one PNG to ``path``. Numbers are ``LABEL_PT`` points, moved apart (with a leader line) where they
     would overlap. Returns what was drawn (:func:`_drawn`: the lines from wrong placements, the labels), for checks.
     """
     plt = pyplot()
     axis = up_axis(template[0])
     panels = []   # (name, row, view, image, xy, visible, right, xy_true, visible_true)
+    pictures = {} if pictures is None else pictures
     for name, (V, F) in [("template", template)] + list(poses.items()):
-        Vn = normalise_for_picture(stand_up(V, axis))
+        if (id(V), id(F)) not in pictures:
+            Vn = normalise_for_picture(stand_up(V, axis))
+            pictures[(id(V), id(F))] = {"V": Vn, "scene": _scene(Vn, F), "keep": (V, F)}
+        mesh = pictures[(id(V), id(F))]
+        Vn, scene = mesh["V"], mesh["scene"]
         L = len(landmark_vids[name])
         pred = np.arange(L) if name == "template" else np.asarray(predictions[name], np.int64)
         own = np.asarray(landmark_vids[name], np.int64)
         for r, view in enumerate(views):
-            image = render_colored(Vn, F, np.tile(GREY, (len(Vn), 1)), view=view, n_views=n_views, size=size)
-            xy, visible = project_vertices(Vn, F, own[pred], view=view, n_views=n_views, size=size)
-            xy_true, visible_true = project_vertices(Vn, F, own, view=view, n_views=n_views, size=size)
-            panels.append((name, r, view, image, xy, visible, pred == np.arange(L), xy_true, visible_true))
+            if (view, n_views, size) not in mesh:
+                mesh[(view, n_views, size)] = render_colored(Vn, F, np.tile(GREY, (len(Vn), 1)), view=view,
+                                                             n_views=n_views, size=size, scene=scene)
+            xy, visible = project_vertices(Vn, F, np.concatenate([own[pred], own]), view=view, n_views=n_views,
+                                           size=size, scene=scene)
+            panels.append((name, r, view, mesh[(view, n_views, size)], xy[:L], visible[:L], pred == np.arange(L),
+                           xy[L:], visible[L:]))
     box = crop_box([p[3] for p in panels])
     n_panels = len(poses) + 1
     n_cols = min(wrap, n_panels) if wrap and len(views) == 1 else n_panels
@@ -479,7 +491,7 @@ def plot_landmark_methods(template: tuple, meshes: dict, landmark_vids, names: l
     """
     if not isinstance(landmark_vids, dict):
         landmark_vids = {"template": landmark_vids, **{m: landmark_vids for p in methods.values() for m in p}}
-    figures, shown = [], {}
+    figures, shown, pictures = [], {}, {}
     for method, preds in methods.items():
         accuracy = {m: float(np.mean(p == np.arange(len(p)))) for m, p in preds.items()}
         poses = spread_best_to_worst(sorted(preds, key=lambda m: (-accuracy[m], m)), k=max_poses)
@@ -489,7 +501,7 @@ def plot_landmark_methods(template: tuple, meshes: dict, landmark_vids, names: l
                              {"template": landmark_vids["template"], **{m: landmark_vids[m] for m in poses}},
                              {m: preds[m] for m in poses}, list(names),
                              f"{method}: landmarks on the best .. worst test poses (mean accuracy {mean:.2f})",
-                             os.path.join(out_dir, file), views=views)
+                             os.path.join(out_dir, file), views=views, pictures=pictures)
         figures.append(file)
         shown[method] = poses
     if shown:
@@ -499,7 +511,7 @@ def plot_landmark_methods(template: tuple, meshes: dict, landmark_vids, names: l
                               **{k: landmark_vids[pose] for k, (_, pose) in worst.items()}},
                              {k: methods[m][pose] for k, (m, pose) in worst.items()}, list(names),
                              "the worst test pose of each method", os.path.join(out_dir, worst_file),
-                             views=views[:1], wrap=3)
+                             views=views[:1], wrap=3, pictures=pictures)
         figures.insert(0, worst_file)
     return figures, shown
 

@@ -184,3 +184,30 @@ def test_long_titles_are_wrapped_inside_the_figure(width):
     box, page = text.get_window_extent(), fig.bbox
     plt.close(fig)
     assert box.x0 >= page.x0 and box.x1 <= page.x1
+
+
+def test_landmark_figures_of_the_same_meshes_share_their_scenes_and_pictures(tmp_path, monkeypatch):
+    """plot_landmark_methods draws the template and the same poses in several figures: each mesh's ray-casting
+    scene and grey picture per camera are made once, and the files are the same as drawn without sharing."""
+    V, F = sphere_mesh()
+    front = np.nonzero((V[:, 2] > 0.85))[0][:8]
+    pose = (V * np.array([1.0, 1.1, 0.9]), F)
+    pred = np.arange(8)
+    pred[2] = 5
+    methods = {"a": {"pose": pred}, "b": {"pose": np.arange(8)}}
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    for method, preds in methods.items():                       # each figure on its own, nothing shared
+        pm.plot_landmark_panels((V, F), {"pose": pose}, {"template": front, "pose": front}, preds,
+                                [f"l{i}" for i in range(8)], f"{method}: x", fresh / f"{method}.png", views=(0, 1))
+    built, scene = [], pm._scene
+    monkeypatch.setattr(pm, "_scene", lambda V, F: built.append(len(V)) or scene(V, F))
+    shared, pictures = tmp_path / "shared", {}
+    shared.mkdir()
+    for method, preds in methods.items():
+        pm.plot_landmark_panels((V, F), {"pose": pose}, {"template": front, "pose": front}, preds,
+                                [f"l{i}" for i in range(8)], f"{method}: x", shared / f"{method}.png", views=(0, 1),
+                                pictures=pictures)
+    assert len(built) == 2                                       # the template's scene and the pose's, once each
+    for method in methods:
+        assert (fresh / f"{method}.png").read_bytes() == (shared / f"{method}.png").read_bytes()
