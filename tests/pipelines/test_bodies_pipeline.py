@@ -31,12 +31,17 @@ def test_bodies_pipeline_generates_other_bodies_and_plans(tmp_path):
 
 def test_bodies_stages_are_the_default_pipelines_correspondence_stages():
     """Every problem-2 stage of pipeline.yaml, with the same function, inputs and params (the template named
-    ${template}, the metrics stage named evaluate as in scape.yaml): update pipelines/bodies.yaml beside it."""
+    ${template}, the metrics stage named evaluate as in scape.yaml), but for one difference: the dense maps'
+    refinement plan for bodies of other people (docs/dense.md "Refinement plan"). Update pipelines/bodies.yaml
+    beside it."""
     default, bodies = _yaml(DEFAULT)["stages"], _yaml(BODIES)["stages"]
     names = list(default)
     corr = names[names.index("mesh"):]
     expected = yaml.safe_load(yaml.safe_dump({("evaluate" if n == "corr_metrics" else n): default[n] for n in corr})
                               .replace("${humans.template}", "${template}"))
+    for stage in ("dense_sparse", "dense_auto"):
+        assert "refine" not in expected[stage]["params"]
+        expected[stage]["params"]["refine"] = "extrinsic+deform"
     assert bodies == expected
     assert _yaml(BODIES)["datasets"] == yaml.safe_load(
         yaml.safe_dump({k: v for k, v in _yaml(DEFAULT)["datasets"].items() if "humans.root" in str(v)})
