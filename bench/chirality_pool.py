@@ -27,7 +27,7 @@ if __name__ == "__main__":
 
 import numpy as np  # noqa: E402
 
-from bench.dense_hypotheses import SETTINGS, seed_range, generated_targets  # noqa: E402
+from bench.dense_hypotheses import SETTINGS, generated_targets, generated_template, seed_range  # noqa: E402
 
 RIGHT, PART = 0.7, 0.2       # fraction of samples within 0.1 sqrt(area) of the truth: right / part right (twist)
 
@@ -65,17 +65,11 @@ def main(argv=None) -> int:
 
     from corr_core.correspondence.dense import basis
     from corr_core.correspondence.dense.init import CHIRALITY_POOL
-    from corr_core.generate.humanoid import write_humanoid_dataset
-    from corr_core.geometry.mesh_io import load_mesh
 
     work = args.work or tempfile.mkdtemp(prefix="chirality_pool_")
     by_class: dict[str, list[float]] = {"right": [], "twist": [], "wrong": []}
     for seed in seed_range(args.seeds):
-        root = os.path.join(work, f"bodies_seed{seed}")
-        if not os.path.isdir(root):
-            write_humanoid_dataset(root, n_poses=args.poses, seed=seed, vary_bodies=True, remeshed=("decimated",))
-        V_s, F_s = load_mesh(os.path.join(root, "meshes", "template", "mesh000.obj"))
-        S = basis.mesh_basis(V_s, F_s, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
+        root, _, S = generated_template(work, seed, args.poses, patch_geodesics=False)
         for name, V_t, F_t, truth in generated_targets(root, True):
             T = basis.mesh_basis(V_t, F_t, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
             rows = candidate_rows(S, T, truth)

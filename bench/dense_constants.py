@@ -41,7 +41,8 @@ if __name__ == "__main__":
 
 import numpy as np  # noqa: E402
 
-from bench.dense_hypotheses import SETTINGS, generated_targets, resumed_results, seed_range  # noqa: E402
+from bench.dense_hypotheses import (SETTINGS, generated_targets, generated_template, resumed_results,  # noqa: E402
+                                   seed_range)
 
 DEFAULTS = {"chirality": 0.3, "stiffness": 0.03, "n_patches": SETTINGS["n_patches"], "patch_size": 64}
 BEFORE_DEFORM = "extrinsic+spectral"
@@ -234,21 +235,14 @@ def main(argv=None) -> int:
 
     from corr_core.correspondence.dense import basis
     from corr_core.correspondence.landmarks import read_landmarks
-    from corr_core.generate.humanoid import write_humanoid_dataset
-    from corr_core.geometry.mesh_io import load_mesh
 
     work = args.work or tempfile.mkdtemp(prefix="dense_constants_")
     results = resumed_results(args.json, seed_range(args.seeds))   # resume: settings already in the file are kept
     by_target = {(r["seed"], r["mesh"]): r for r in results}
     for seed in seed_range(args.seeds):
-        root = os.path.join(work, f"bodies_seed{seed}")
-        if not os.path.isdir(root):
-            write_humanoid_dataset(root, n_poses=args.poses, seed=seed, vary_bodies=True, remeshed=("decimated",))
-        V_s, F_s = load_mesh(os.path.join(root, "meshes", "template", "mesh000.obj"))
+        root, V_s, S = generated_template(work, seed, args.poses)
         landmarks, _ = read_landmarks(os.path.join(root, "landmark_vids.txt"), n_vertices=len(V_s))
         sparse, _ = read_landmarks(os.path.join(root, "sparse_landmark_vids.txt"), n_vertices=len(V_s))
-        S = basis.mesh_basis(V_s, F_s, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
-        S.sample_distances(SETTINGS["n_patches"])
         for name, V_t, F_t, truth in generated_targets(root, True):
             record = by_target.get((seed, name))
             todo = [(n, v) for n, v in wanted if record is None or

@@ -87,17 +87,15 @@ def choice(rows: list[dict]) -> dict:
     after the first step (``refine.surviving_hypotheses``), which it keeps, its confidence, and whether that map
     is right (landmark accuracy >= 0.5). Rows of a file without ``step_distortions`` count as never dropped."""
     from corr_core.correspondence.dense.init import hypotheses_to_refine
-    from corr_core.correspondence.dense.refine import BestMap, surviving_hypotheses
+    from corr_core.correspondence.dense.refine import best_refined, surviving_hypotheses
 
     n = hypotheses_to_refine([r["chirality"] for r in rows], [r["wks"] for r in rows])
     first = tuple(r.get("step_distortions", [None, r["distortion"]])[1] for r in rows[:n])
     alive = surviving_hypotheses(first)
-    final = tuple(r["distortion"] if i in alive else first[i] for i, r in enumerate(rows[:n]))
-    dropped = tuple(i not in alive for i in range(n))
-    best = BestMap(np.zeros(0, dtype=np.int64), min(alive, key=lambda i: (final[i], i)), final,
-                   dropped if any(dropped) else (), first if any(dropped) else ())
+    final = [r["distortion"] if i in alive else first[i] for i, r in enumerate(rows[:n])]
+    best = best_refined([np.zeros(0, dtype=np.int64)] * n, final, first_step=first, alive=alive)
     kept = rows[best.index]
-    return {"refined": n, "dropped": int(sum(dropped)), "kept": best.index, "confidence": best.confidence,
+    return {"refined": n, "dropped": sum(best.dropped), "kept": best.index, "confidence": best.confidence,
             "margin": best.margin, "right": kept["landmark_accuracy"] >= 0.5, "mean_error": kept["mean_error"]}
 
 
@@ -120,6 +118,27 @@ def first_step_line(results: list[dict]) -> None:
         print(f"after the first step: the right map the least distorted on {least} of {counted} targets; the "
               f"others' distortion above it by {min(excess):.1%} to {max(excess):.1%} (median "
               f"{np.median(excess):.1%})")
+
+
+def generated_template(work: str, seed: int, n_poses: int, *, vary_bodies: bool = True, decimated: bool = True,
+                       patch_geodesics: bool = True):
+    """(dataset folder, template vertices (n,3), template basis) of one seed's generated humanoids under ``work``:
+    the folder (``bodies_seed<seed>``, or ``same_seed<seed>`` for one body in every pose) is written on first use
+    (``write_humanoid_dataset``, with a decimated copy of pose 1 when ``decimated``); the basis at ``SETTINGS``,
+    with its refinement patches' geodesics computed once when ``patch_geodesics``."""
+    from corr_core.correspondence.dense import basis
+    from corr_core.generate.humanoid import write_humanoid_dataset
+    from corr_core.geometry.mesh_io import load_mesh
+
+    root = os.path.join(work, f"{'bodies' if vary_bodies else 'same'}_seed{seed}")
+    if not os.path.isdir(root):
+        write_humanoid_dataset(root, n_poses=n_poses, seed=seed, vary_bodies=vary_bodies,
+                               remeshed=("decimated",) if decimated else ())
+    V_s, F_s = load_mesh(os.path.join(root, "meshes", "template", "mesh000.obj"))
+    S = basis.mesh_basis(V_s, F_s, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
+    if patch_geodesics:
+        S.sample_distances(SETTINGS["n_patches"])
+    return root, V_s, S
 
 
 def generated_targets(root: str, decimated: bool):
@@ -149,21 +168,13 @@ def main(argv=None) -> int:
 
     from corr_core.correspondence.dense import basis
     from corr_core.correspondence.landmarks import read_landmarks
-    from corr_core.generate.humanoid import write_humanoid_dataset
-    from corr_core.geometry.mesh_io import load_mesh
 
     work = args.work or tempfile.mkdtemp(prefix="dense_hypotheses_")
     results = resumed_results(args.json)                     # resume: targets already in the file are kept
     done = {(r["seed"], r["mesh"]) for r in results}
     for seed in seed_range(args.seeds):
-        root = os.path.join(work, f"bodies_seed{seed}")
-        if not os.path.isdir(root):
-            write_humanoid_dataset(root, n_poses=args.poses, seed=seed, vary_bodies=True,
-                                   remeshed=("decimated",) if args.decimated else ())
-        V_s, F_s = load_mesh(os.path.join(root, "meshes", "template", "mesh000.obj"))
+        root, V_s, S = generated_template(work, seed, args.poses, decimated=args.decimated)
         landmarks, _ = read_landmarks(os.path.join(root, "landmark_vids.txt"), n_vertices=len(V_s))
-        S = basis.mesh_basis(V_s, F_s, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
-        S.sample_distances(SETTINGS["n_patches"])
         for name, V_t, F_t, truth in generated_targets(root, args.decimated):
             if (seed, name) in done or (args.meshes and name not in args.meshes.split(",")):
                 continue

@@ -32,7 +32,8 @@ if __name__ == "__main__":
 
 import numpy as np  # noqa: E402
 
-from bench.dense_hypotheses import SETTINGS, generated_targets, resumed_results, seed_range  # noqa: E402
+from bench.dense_hypotheses import (SETTINGS, generated_targets, generated_template, resumed_results,  # noqa: E402
+                                   seed_range)
 
 PLANS = ("extrinsic+spectral+deform", "extrinsic+deform")
 
@@ -96,8 +97,6 @@ def main(argv=None) -> int:
 
     from corr_core.correspondence.dense import basis, refine_plan
     from corr_core.correspondence.landmarks import read_landmarks
-    from corr_core.generate.humanoid import write_humanoid_dataset
-    from corr_core.geometry.mesh_io import load_mesh
 
     plans = [p.strip() for p in args.plans.split(",") if p.strip()]
     for p in plans:
@@ -107,13 +106,8 @@ def main(argv=None) -> int:
     results = [r for r in resumed_results(args.json, seeds) if set(plans) <= set(r["plans"])]
     done = {(r["seed"], r["mesh"]) for r in results}
     for seed in seeds:
-        root = os.path.join(work, f"bodies_seed{seed}")
-        if not os.path.isdir(root):
-            write_humanoid_dataset(root, n_poses=args.poses, seed=seed, vary_bodies=True, remeshed=("decimated",))
-        V_s, F_s = load_mesh(os.path.join(root, "meshes", "template", "mesh000.obj"))
+        root, V_s, S = generated_template(work, seed, args.poses)
         sparse, _ = read_landmarks(os.path.join(root, "sparse_landmark_vids.txt"), n_vertices=len(V_s))
-        S = basis.mesh_basis(V_s, F_s, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
-        S.sample_distances(SETTINGS["n_patches"])
         for name, V_t, F_t, truth in generated_targets(root, decimated=True):
             if (seed, name) in done:
                 continue

@@ -28,7 +28,8 @@ if __name__ == "__main__":
 
 import numpy as np  # noqa: E402
 
-from bench.dense_hypotheses import SETTINGS, generated_targets, resumed_results, seed_range  # noqa: E402
+from bench.dense_hypotheses import (SETTINGS, generated_targets, generated_template, resumed_results,  # noqa: E402
+                                   seed_range)
 
 BEFORE_SETTLING = "extrinsic+spectral+deform"
 
@@ -74,20 +75,12 @@ def main(argv=None) -> int:
     stiffness = [float(x) for x in args.stiffness.split(",")]
 
     from corr_core.correspondence.dense import basis
-    from corr_core.generate.humanoid import write_humanoid_dataset
-    from corr_core.geometry.mesh_io import load_mesh
 
     work = args.work or tempfile.mkdtemp(prefix="settle_sweep_")
     results = resumed_results(args.json, seed_range(args.seeds))   # resume: targets already in the file are kept
     done = {(r["seed"], r["mesh"]) for r in results}
     for seed in seed_range(args.seeds):
-        root = os.path.join(work, f"{'same' if args.same_body else 'bodies'}_seed{seed}")
-        if not os.path.isdir(root):
-            write_humanoid_dataset(root, n_poses=args.poses, seed=seed, vary_bodies=not args.same_body,
-                                   remeshed=("decimated",))
-        V_s, F_s = load_mesh(os.path.join(root, "meshes", "template", "mesh000.obj"))
-        S = basis.mesh_basis(V_s, F_s, k=SETTINGS["k"], n_samples=SETTINGS["n_samples"])
-        S.sample_distances(SETTINGS["n_patches"])
+        root, _, S = generated_template(work, seed, args.poses, vary_bodies=not args.same_body)
         for name, V_t, F_t, truth in generated_targets(root, True):
             if (seed, name) in done:
                 continue

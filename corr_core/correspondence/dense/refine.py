@@ -538,6 +538,24 @@ def surviving_hypotheses(first_step: Sequence[float], *, drop_margin: float = CO
     return [i for i, d in enumerate(first_step) if d <= (1.0 + drop_margin) * least]
 
 
+def best_refined(maps: Sequence[np.ndarray], distortions: Sequence[float], *, first_step: Sequence[float] = (),
+                 alive: Sequence[int] | None = None) -> BestMap:
+    """The choice ``refine_best`` makes among refined hypotheses: the least distorted of those refined to the end
+    (ties to the earlier one).
+
+    Args: maps: h refined maps ((n_s,) int local ids); distortions: (h,) each one's ``map_distortion`` after the
+        last step it got; first_step: (h,) their distortions after the first step, alive: the indices refined to
+        the end (``surviving_hypotheses``; None: all, and first_step is not needed).
+    Returns: ``BestMap`` (dropped and first_step recorded when some hypothesis was dropped).
+    """
+    alive = range(len(maps)) if alive is None else alive
+    best = min(alive, key=lambda i: (distortions[i], i))
+    dropped = tuple(i not in alive for i in range(len(maps)))
+    if not any(dropped):
+        return BestMap(maps[best], best, tuple(distortions))
+    return BestMap(maps[best], best, tuple(distortions), dropped, tuple(first_step))
+
+
 def refine_best(source: MeshBasis, target: MeshBasis, maps: list,
                 refine: str | Sequence | None = DEFAULT_REFINE, options: Mapping | None = None, *,
                 drop_margin: float = CONFIDENT_MARGIN) -> BestMap:
@@ -562,14 +580,9 @@ def refine_best(source: MeshBasis, target: MeshBasis, maps: list,
         for i in alive:
             refined[i] = refine_map(source, target, refined[i], rest)
             scores[i] = map_distortion(source, target, refined[i])
-        best = min(alive, key=lambda i: (scores[i], i))
-        dropped = tuple(i not in alive for i in range(len(maps)))
-        return BestMap(refined[best], best, tuple(scores), dropped if any(dropped) else (),
-                       first_step if any(dropped) else ())
+        return best_refined(refined, scores, first_step=first_step, alive=alive)
     refined = [refine_map(source, target, m, plan) for m in maps]
-    scores = tuple(map_distortion(source, target, m) for m in refined)
-    best = int(np.argmin(scores))
-    return BestMap(refined[best], best, scores)
+    return best_refined(refined, [map_distortion(source, target, m) for m in refined])
 
 
 REFINE_STEPS = {"extrinsic": refine_extrinsic, "spectral": refine_spectral, "deform": refine_deform,
