@@ -85,15 +85,16 @@ def score_candidates(S, T, V_t, F_t, truth, landmarks, n_candidates: int, plan: 
 def choice(rows: list[dict]) -> dict:
     """What the automatic mode does with these scored candidates: how many it refines, which of them it drops
     after the first step (``refine.surviving_hypotheses``), which it keeps, its confidence, and whether that map
-    is right (landmark accuracy >= 0.5). Rows of a file without ``step_distortions`` count as never dropped."""
+    is right (landmark accuracy >= 0.5). Rows of a file without ``step_distortions`` count as never dropped (and
+    are compared by their last distortion)."""
     from corr_core.correspondence.dense.init import hypotheses_to_refine
     from corr_core.correspondence.dense.refine import best_refined, surviving_hypotheses
 
     n = hypotheses_to_refine([r["chirality"] for r in rows], [r["wks"] for r in rows])
-    first = tuple(r.get("step_distortions", [None, r["distortion"]])[1] for r in rows[:n])
-    alive = surviving_hypotheses(first)
-    final = [r["distortion"] if i in alive else first[i] for i, r in enumerate(rows[:n])]
-    best = best_refined([np.zeros(0, dtype=np.int64)] * n, final, first_step=first, alive=alive)
+    steps = [r.get("step_distortions", [None, r["distortion"]])[1:] for r in rows[:n]]   # after each step
+    alive = surviving_hypotheses([s[0] for s in steps]) if all(len(s) > 1 for s in steps) else list(range(n))
+    best = best_refined([np.zeros(0, dtype=np.int64)] * n, [s if i in alive else s[:1] for i, s in enumerate(steps)],
+                        alive=alive)
     kept = rows[best.index]
     return {"refined": n, "dropped": sum(best.dropped), "kept": best.index, "confidence": best.confidence,
             "margin": best.margin, "right": kept["landmark_accuracy"] >= 0.5, "mean_error": kept["mean_error"]}
