@@ -100,6 +100,32 @@ def choice(rows: list[dict]) -> dict:
             "margin": best.margin, "right": kept["landmark_accuracy"] >= 0.5, "mean_error": kept["mean_error"]}
 
 
+CHOICE_RULES = {"last step": lambda steps: steps[-1], "first and last steps": lambda steps: (steps[0] * steps[-1]) ** 0.5,
+                "first step": lambda steps: steps[0]}
+
+
+def choice_rules_line(results: list[dict]) -> None:
+    """Print the flips other choice rules would have made among the same refined hypotheses (every one refined to
+    the end, none dropped; a hypothesis scored by ``CHOICE_RULES``' function of its distortions after each step),
+    next to ``refine.refinement_score``'s (the code's: the geometric mean over every step)."""
+    from corr_core.correspondence.dense.init import hypotheses_to_refine
+    from corr_core.correspondence.dense.refine import refinement_score
+
+    rules = {"every step (the code's)": refinement_score, **CHOICE_RULES}
+    flips = {rule: [] for rule in rules}
+    for r in results:
+        rows = r["candidates"][:hypotheses_to_refine([c["chirality"] for c in r["candidates"]],
+                                                     [c["wks"] for c in r["candidates"]])]
+        if len(rows) < 2 or any("step_distortions" not in c for c in rows):
+            continue
+        for rule, score in rules.items():
+            kept = min(range(len(rows)), key=lambda i: (score(rows[i]["step_distortions"][1:]), i))
+            if rows[kept]["landmark_accuracy"] < 0.5:
+                flips[rule].append(f"seed {r['seed']} {r['mesh']}")
+    print("flips when every hypothesis is refined to the end and chosen by its distortion after: " + "; ".join(
+        f"{rule} {len(f)}" + (f" ({', '.join(f)})" if f else "") for rule, f in flips.items()))
+
+
 def first_step_line(results: list[dict]) -> None:
     """Print how well the distortion after the first refinement step already tells the right map (the least
     distorted right one among the refined hypotheses) from the others: on how many targets it is the least
@@ -202,6 +228,7 @@ def main(argv=None) -> int:
     print(f"hypotheses refined: {sum(r['refined'] for r in results)}, of which dropped after the first step: "
           f"{sum(r['dropped'] for r in results)} (of the {sum(r['refined'] - 1 for r in results)} not kept)")
     first_step_line(results)
+    choice_rules_line(results)
     if right:
         margins = sorted(r["margin"] for r in right)
         print(f"right choices: margin min {margins[0]:.3f}, 10th percentile {np.percentile(margins, 10):.3f}, "

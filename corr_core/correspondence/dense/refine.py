@@ -489,11 +489,11 @@ def with_alternative(source: MeshBasis, target: MeshBasis, best: BestMap, altern
 CONFIDENT_MARGIN = 0.10
 LOW_CONFIDENCE = 0.5     # below this a map is reported for a look (half the margin of a sure choice)
 # ``refine_best`` drops a hypothesis after the first refinement step only when it is this much (relative) more
-# distorted than the least distorted one there. The first step judges less surely than the whole plan: on 141
-# generated targets of other bodies (`python bench/dense_hypotheses.py --seeds S --candidates 3 --decimated` for
-# seeds 0-9, 13 and 14-23; docs/dense.md "Confidence") the right map was up to 17.8 % more distorted than a wrong
-# one after the first step (seed 23's pose 6, dropped at the former margin of 10 %: a flip reported with
-# confidence 1) and the least distorted one at the end; 0.3 leaves room above that.
+# distorted than the least distorted one there. The first step judges less surely than the whole plan: on 217
+# generated targets of other bodies (`python bench/dense_hypotheses.py --seeds S --candidates 3 --decimated`,
+# seeds 0-9 and 13-33; docs/dense.md "Confidence") the right map was once 1 / (1 - 0.151) = 1.178 times the least
+# distorted one after the first step (seed 23's pose 6: dropped at the former margin, 10 %, a flip reported with
+# confidence 1) and came out the least distorted at the end; 0.3 leaves room above that.
 DROP_MARGIN = 0.30
 
 
@@ -549,8 +549,9 @@ def refinement_score(step_distortions: Sequence[float]) -> float:
 
     Why not the last one alone: the later steps smooth a wrong map (a body turned by 180 degrees) nearly as well as
     the right one, so its last distortion can come out a little lower, while after the earlier steps it was
-    clearly higher. On 141 generated targets of other bodies (docs/dense.md "Confidence") the last distortion alone
-    kept 2 flipped maps (both reported with low confidence), this score none."""
+    clearly higher. On 217 generated targets of other bodies (docs/dense.md "Confidence", the line "flips when every
+    hypothesis is refined to the end" of ``bench/dense_hypotheses.py``) the last distortion alone kept 2 flipped
+    maps (both reported with low confidence), this score none."""
     values = np.asarray(step_distortions, dtype=np.float64)
     if not len(values):
         raise ValueError("refinement_score: no distortion given")
