@@ -29,6 +29,26 @@ def test_fan_rotations_recover_a_rigid_rotation(pair):
     assert np.allclose(np.linalg.det(R), 1.0)
 
 
+def test_fan_rotations_are_the_best_rotation_of_every_fan_of_a_bent_mesh(pair):
+    """Against the textbook solution (SVD of each fan's weighted covariance, reflections excluded) on a non-rigid
+    deformation: every vertex's fan gets its own rotation."""
+    S, _ = pair
+    edges, weights, _, _ = arap_operators(S.V, S.F)
+    unsigned, _ = _incidence(edges, S.n)
+    bent = S.V + 0.05 * np.sin(3.0 * S.V[:, [1, 2, 0]]) + 0.02 * np.random.default_rng(0).standard_normal(S.V.shape)
+    E0, E1 = S.V[edges[:, 0]] - S.V[edges[:, 1]], bent[edges[:, 0]] - bent[edges[:, 1]]
+    R = _fan_rotations(E0, E1, weights, unsigned, squarings=12)
+    cov = np.asarray(unsigned @ (weights[:, None, None] * E0[:, :, None] * E1[:, None, :]).reshape(-1, 9)).reshape(-1, 3, 3)
+    U, _, Wt = np.linalg.svd(cov)                                        # R = W diag(1, 1, det) U^T
+    D = np.tile(np.eye(3), (S.n, 1, 1))
+    D[:, 2, 2] = np.sign(np.linalg.det(np.einsum("bji,bkj->bik", Wt, U)))
+    expected = np.einsum("bji,bjk,blk->bil", Wt, D, U)
+    gap = np.sort(np.linalg.svd(cov, compute_uv=False), axis=1)
+    clear = gap[:, 1] - gap[:, 0] > 1e-3 * gap[:, 2]                   # fans with a well-defined best rotation
+    assert clear.mean() > 0.9
+    assert np.allclose(R[clear], expected[clear], atol=1e-6)
+
+
 def test_arap_operators_are_a_graph_laplacian_with_nonnegative_weights(pair):
     S, _ = pair
     edges, weights, K, mass = arap_operators(S.V, S.F)
