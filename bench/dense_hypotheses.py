@@ -68,10 +68,10 @@ def score_candidates(S, T, V_t, F_t, truth, landmarks, n_candidates: int, plan: 
     ranked = init.rank_candidates(info["candidates"])
     solver = GeodesicSolver(V_t, F_t)
     rows = []
+    steps = refine.refine_plan(plan or refine.DEFAULT_REFINE, {"extrinsic": {"n_patches": SETTINGS["n_patches"]}})
     for c, (C, p2p) in zip(ranked, maps):
         refined = upsample_spectral(S, T, C, p2p)
         step_distortions = [refine.map_distortion(S, T, refined)]          # after upsampling, then each step
-        steps = refine.refine_plan(plan or refine.DEFAULT_REFINE, {"extrinsic": {"n_patches": SETTINGS["n_patches"]}})
         for step in steps:
             refined = step.run(S, T, refined)
             step_distortions.append(refine.map_distortion(S, T, refined))
@@ -105,22 +105,22 @@ def choice(rows: list[dict]) -> dict:
             "twisted": kept["landmark_accuracy"] >= 0.5 and kept["mean_error"] > TWISTED_ERROR}
 
 
-CHOICE_RULES = {"last step": lambda steps: steps[-1], "first and last steps": lambda steps: (steps[0] * steps[-1]) ** 0.5,
+CHOICE_RULES = {"last step": lambda steps: steps[-1],
+                "first and last steps": lambda steps: (steps[0] * steps[-1]) ** 0.5,
                 "first step": lambda steps: steps[0]}
 
 
 def choice_rules_line(results: list[dict]) -> None:
     """Print the flips other choice rules would have made among the same refined hypotheses (every one refined to
     the end, none dropped; a hypothesis scored by ``CHOICE_RULES``' function of its distortions after each step),
-    next to ``refine.refinement_score``'s (the code's: the geometric mean over every step)."""
-    from corr_core.correspondence.dense.init import hypotheses_to_refine
+    next to ``refine.refinement_score``'s (the code's: the geometric mean over every step). ``results``: rows with
+    ``choice``'s keys ("refined": how many candidates the code refines)."""
     from corr_core.correspondence.dense.refine import refinement_score
 
     rules = {"every step (the code's)": refinement_score, **CHOICE_RULES}
     flips = {rule: [] for rule in rules}
     for r in results:
-        rows = r["candidates"][:hypotheses_to_refine([c["chirality"] for c in r["candidates"]],
-                                                     [c["wks"] for c in r["candidates"]])]
+        rows = r["candidates"][:r["refined"]]
         if len(rows) < 2 or any("step_distortions" not in c for c in rows):
             continue
         for rule, score in rules.items():

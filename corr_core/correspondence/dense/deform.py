@@ -79,20 +79,22 @@ def _fan_rotations(E0: np.ndarray, E1: np.ndarray, weights: np.ndarray, unsigned
     M = {ij: v / bound + (1.0 if ij[0] == ij[1] else 0.0) for ij, v in N.items()}
     for _ in range(squarings):
         M = _squared_over_trace(M)
-    at = lambda i, j: M[(i, j) if i <= j else (j, i)]                   # noqa: E731
     start = (1.0, 1e-3, 2e-3, 3e-3)                                     # fixed start: deterministic
-    q = np.column_stack([sum(at(i, j) * start[j] for j in range(4)) for i in range(4)])
+    q = np.column_stack([sum(_entry(M, i, j) * start[j] for j in range(4)) for i in range(4)])
     w, x, y, z = (q / np.maximum(np.linalg.norm(q, axis=1, keepdims=True), 1e-300)).T
     return np.stack([np.stack([w*w + x*x - y*y - z*z, 2 * (x*y - w*z), 2 * (x*z + w*y)], -1),
                      np.stack([2 * (x*y + w*z), w*w - x*x + y*y - z*z, 2 * (y*z - w*x)], -1),
                      np.stack([2 * (x*z - w*y), 2 * (y*z + w*x), w*w - x*x - y*y + z*z], -1)], axis=1)
 
 
+def _entry(M: dict, i: int, j: int) -> np.ndarray:
+    """Entry (i, j) (n,) of symmetric 4x4 matrices given by their 10 distinct entries {(i, j), i <= j: (n,)}."""
+    return M[(i, j) if i <= j else (j, i)]
+
+
 def _squared_over_trace(M: dict) -> dict:
     """M @ M / trace(M @ M) of symmetric 4x4 matrices given by their 10 distinct entries {(i, j), i <= j: (n,)}."""
-    at = lambda i, j: M[(i, j) if i <= j else (j, i)]                   # noqa: E731
-    P = {(i, j): at(i, 0) * at(0, j) + at(i, 1) * at(1, j) + at(i, 2) * at(2, j) + at(i, 3) * at(3, j)
-         for i in range(4) for j in range(i, 4)}
+    P = {(i, j): sum(_entry(M, i, k) * _entry(M, k, j) for k in range(4)) for i in range(4) for j in range(i, 4)}
     trace = np.maximum(P[(0, 0)] + P[(1, 1)] + P[(2, 2)] + P[(3, 3)], 1e-300)
     return {ij: v / trace for ij, v in P.items()}
 

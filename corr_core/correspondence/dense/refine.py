@@ -601,7 +601,7 @@ def refine_best(source: MeshBasis, target: MeshBasis, maps: list,
     if len(maps) == 1 or len(plan) <= 1:
         refined = [refine_map(source, target, m, plan) for m in maps]
         return best_refined(refined, [[map_distortion(source, target, m)] for m in refined])
-    refined = [refine_map(source, target, m, plan[:1]) for m in maps]
+    refined = [plan[0].run(source, target, m) for m in maps]
     steps = [[map_distortion(source, target, m)] for m in refined]
     alive = surviving_hypotheses([s[0] for s in steps], drop_margin=drop_margin)
     for i in alive:
