@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import glob
+import inspect
 import json
 import os
 import sys
@@ -72,8 +73,12 @@ def score_candidates(S, T, V_t, F_t, truth, landmarks, n_candidates: int, plan: 
     for c, (C, p2p) in zip(ranked, maps):
         refined = upsample_spectral(S, T, C, p2p)
         step_distortions = [refine.map_distortion(S, T, refined)]          # after upsampling, then each step
-        for step in steps:
-            refined = step.run(S, T, refined)
+        round_distortions = []
+        for i, step in enumerate(steps):
+            if i == 0 and step.name == "extrinsic" and not step.only_if_lower:
+                refined, round_distortions = extrinsic_by_rounds(S, T, refined, step)
+            else:
+                refined = step.run(S, T, refined)
             step_distortions.append(refine.map_distortion(S, T, refined))
         vertex_map = map_to_original(S, T, refined)
         errors = measures.dense_errors(V_t, F_t, {"m": vertex_map}, truth,
@@ -81,9 +86,27 @@ def score_candidates(S, T, V_t, F_t, truth, landmarks, n_candidates: int, plan: 
         _, nearest = measures.landmark_errors(V_t, F_t, transfer_landmarks(vertex_map, landmarks),
                                               truth[landmarks], solver=solver)
         rows.append({"chirality": c.chirality, "wks": c.wks, "distortion": step_distortions[-1],
-                     "step_distortions": step_distortions,
+                     "step_distortions": step_distortions, "round_distortions": round_distortions,
                      "mean_error": float(errors.mean()), "landmark_accuracy": measures.landmark_accuracy(nearest)})
     return rows
+
+
+def extrinsic_by_rounds(S, T, p2p, step):
+    """``step`` (an extrinsic ``RefineStep``) run one round at a time: the same map as ``step.run`` (each round
+    starts from the map alone, and a round that changes nothing ends it), and ``map_distortion`` after every round
+    run ([floats])."""
+    from corr_core.correspondence.dense import refine
+
+    rounds = step.options.get("rounds", inspect.signature(refine.refine_extrinsic).parameters["rounds"].default)
+    one_round = refine.RefineStep("extrinsic", {**step.options, "rounds": 1})
+    distortions = []
+    for _ in range(rounds):
+        new = one_round.run(S, T, p2p)
+        if np.array_equal(new, p2p):
+            break
+        p2p = new
+        distortions.append(refine.map_distortion(S, T, p2p))
+    return p2p, distortions
 
 
 def choice(rows: list[dict]) -> dict:
@@ -150,6 +173,36 @@ def first_step_line(results: list[dict]) -> None:
         print(f"after the first step: the right map the least distorted on {least} of {counted} targets; the "
               f"others' distortion above it by {min(excess):.1%} to {max(excess):.1%} (median "
               f"{np.median(excess):.1%})")
+
+
+def rounds_line(results: list[dict]) -> None:
+    """Print how well a shorter first step would judge: after each round r of the first (extrinsic) step, the
+    largest ratio of the right map's distortion (the least distorted right one at the end) to the least
+    distorted hypothesis's, and how many of the other hypotheses are beyond ``refine.DROP_MARGIN`` there (r = 0:
+    the starting maps). A cheaper first step could drop hypotheses after r rounds only if that ratio stays well
+    below 1 + DROP_MARGIN."""
+    from corr_core.correspondence.dense.refine import DROP_MARGIN
+
+    refined = [r["candidates"][:r["refined"]] for r in results]
+    refined = [c for c in refined if len(c) > 1 and all("round_distortions" in x for x in c)]
+    rounds = max((len(x["round_distortions"]) for c in refined for x in c), default=0)
+    parts = []
+    for r in range(rounds + 1):
+        worst, beyond, others = 1.0, 0, 0
+        for cands in refined:
+            right = [i for i, x in enumerate(cands) if x["landmark_accuracy"] >= 0.5 and x["mean_error"] <= TWISTED_ERROR]
+            if not right:
+                continue
+            kept = min(right, key=lambda i: cands[i]["distortion"])
+            at = [x["round_distortions"][min(r, len(x["round_distortions"])) - 1] if r and x["round_distortions"]
+                  else x["step_distortions"][0] for x in cands]
+            worst = max(worst, at[kept] / min(at))
+            beyond += sum(1 for i, d in enumerate(at) if i != kept and d > (1 + DROP_MARGIN) * min(at))
+            others += len(at) - 1
+        parts.append(f"{r}: {worst:.3f}, {beyond}/{others}")
+    if parts:
+        print(f"after r rounds of the first step (r: the right map's distortion / the least one's at most, the "
+              f"others beyond DROP_MARGIN {DROP_MARGIN}): " + "; ".join(parts))
 
 
 def generated_template(work: str, seed: int, n_poses: int, *, vary_bodies: bool = True, decimated: bool = True,
@@ -233,6 +286,7 @@ def main(argv=None) -> int:
     print(f"hypotheses refined: {sum(r['refined'] for r in results)}, of which dropped after the first step: "
           f"{sum(r['dropped'] for r in results)} (of the {sum(r['refined'] - 1 for r in results)} not kept)")
     first_step_line(results)
+    rounds_line(results)
     choice_rules_line(results)
     if right:
         margins = sorted(r["margin"] for r in right)

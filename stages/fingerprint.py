@@ -160,13 +160,17 @@ def _ast_digest(obj: Any) -> tuple[str, ast.AST | None]:
     try:
         src = textwrap.dedent(inspect.getsource(obj))
         tree = _strip_docstrings(ast.parse(src))
-        undecorated = ast.parse(src)
-        _strip_docstrings(undecorated)
-        for node in ast.walk(undecorated):
-            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
-                node.decorator_list = []
-                break
-        return _hash_tree(undecorated), tree
+        outer = next((node for node in ast.walk(tree)
+                      if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))), None)
+        decorators = outer.decorator_list if outer is not None else []
+        if outer is not None:
+            outer.decorator_list = []            # hashed without them (parsing once: half the planning time)
+        try:
+            digest = _hash_tree(tree)
+        finally:
+            if outer is not None:
+                outer.decorator_list = decorators
+        return digest, tree
     except (OSError, TypeError, SyntaxError):
         return hashlib.blake2b(repr(getattr(obj, "__code__", obj)).encode(), digest_size=16).hexdigest(), None
 

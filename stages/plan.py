@@ -156,8 +156,15 @@ class Plan:
         """Tasks without a usable result, tasks whose result left out failed items (they run again after
         those items are retried: cached at once if the same items fail, recomputed if they now succeed), and
         the tasks of forced stages this run has not recomputed yet."""
-        return [t for t in self.tasks() if self.is_forced(t) or not self.store.has(t.key)
-                or any(e[0] for e in self.store.left_out(t.key))]
+        return list(self._missing())
+
+    def has_missing(self) -> bool:
+        """True when some task must run (``missing`` is not empty); stops at the first such task."""
+        return any(True for _ in self._missing())
+
+    def _missing(self):
+        return (t for t in self.tasks() if self.is_forced(t) or not self.store.has(t.key)
+                or any(e[0] for e in self.store.left_out(t.key)))
 
     def is_forced(self, task: Task) -> bool:
         """True when ``task`` belongs to a forced stage and this run has not stored it yet."""

@@ -58,16 +58,19 @@ def stage_summary(plan: Plan, outcome_results: dict[str, TaskResult], missing_ke
     return out
 
 
-def prepare(plan: Plan, log) -> Plan:
+def prepare(plan: Plan, log, on_claimed=None) -> Plan:
     """Make a plan executable: write the generated datasets it waits for (then plan again, so their stages
     get tasks) and save the planner's caches. Only ``run`` and ``sweep`` call this; planning alone writes
-    nothing."""
+    nothing. ``on_claimed()``, when given, is called once the cache folder is claimed and writable, before the
+    datasets are written."""
     check_output_folder(plan.pipeline.output_dir, plan.store.root)
     plan.store.claim()
     if not plan.store.writable():
         raise UserError(f"cannot write the cache folder {plan.store.root} (read-only, or no permission)",
                         fix="run with --cache on a writable folder; `status`, `results`, `report` and "
                             "`run --dry-run` work on a read-only cache")
+    if on_claimed is not None:
+        on_claimed()
     if plan.pending_generated:
         write_generated(plan.pipeline, plan.store, sorted(plan.pending_generated), log)
         plan = plan.again()
@@ -101,12 +104,15 @@ def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None,
         print(format_dry_run(plan, rows))
         return {"dry_run": rows}
     clean_tmp(plan.store)
-    plan = prepare(plan, log)
-    record_before = load_record(plan)
     results: dict[str, TaskResult] = {}
     missing_all: set[str] = set()
     with (client_session(workers, scheduler, plan.store.root, log) if client_getter is None
           else given_client(client_getter)) as get_client:
+        # something will run: start the cluster while the generated datasets are written
+        early = getattr(get_client, "start_early", None)
+        plan = prepare(plan, log, on_claimed=early if early and (plan.pending_generated or plan.has_missing())
+                       else None)
+        record_before = load_record(plan)
         verified: dict[str, dict[str, str]] = {}
         for attempt in range(max_repairs + 1):
             # in rounds: stages waiting for a candidates stage are planned (and run) once its result is stored
