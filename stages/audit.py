@@ -32,12 +32,17 @@ def enabled() -> bool:
 
 class CallRecorder:
     """Context manager recording the (module, qualified name) of every Python function called inside it, in
-    this thread and in threads started meanwhile."""
+    this thread and in threads started meanwhile (until it exits: a thread started inside that outlives it, e.g.
+    one a cluster starting alongside spawned, stops being watched at its next call)."""
 
     def __init__(self):
         self._modules: dict[Any, str | None] = {}
+        self._recording = False
 
     def _profile(self, frame, event, arg):
+        if not self._recording:
+            sys.setprofile(None)    # a thread started while recording, still running after it
+            return
         if event == "call":
             code = frame.f_code
             if code not in self._modules:
@@ -45,18 +50,21 @@ class CallRecorder:
 
     def __enter__(self) -> "CallRecorder":
         self._previous = sys.getprofile()
+        self._recording = True
         sys.setprofile(self._profile)
         threading.setprofile(self._profile)
         return self
 
     def __exit__(self, *exc) -> None:
+        self._recording = False
         sys.setprofile(self._previous)
         threading.setprofile(None)
 
     def executed(self) -> set[tuple[str, str]]:
         """{(module name, qualified name)} of the functions that ran from source files (generated code such
         as a dataclass's ``__init__``, and module bodies run by an import, are left out)."""
-        return {(mod, code.co_qualname) for code, mod in self._modules.items()
+        modules = self._modules.copy()      # one step under the GIL: a late thread cannot resize it meanwhile
+        return {(mod, code.co_qualname) for code, mod in modules.items()
                 if mod and not code.co_filename.startswith("<") and code.co_qualname != "<module>"}
 
 

@@ -289,3 +289,43 @@ def test_a_cached_helper_is_followed_through_its_decorator(package):
     base, parts = fp(package(files))
     assert f"{PKG}.main.table" in parts
     assert fp(package(files, main=("range(n)", "range(1, n)")))[0] != base
+
+
+def test_the_audit_stops_watching_a_thread_that_outlives_it(package):
+    """A thread started while recording (e.g. by a cluster starting alongside a generator) and still running
+    after the recorder exits: what it calls afterwards is not recorded, and reading the record while it runs
+    does not fail (it used to: "dictionary changed size during iteration")."""
+    import threading
+
+    from stages import audit
+
+    main = package({"main.py": '''
+        def during(x):
+            return x + 1
+
+        def after(x):
+            return x + 2
+        '''})
+    inside, exited, done = threading.Event(), threading.Event(), threading.Event()
+
+    def worker():
+        main.during(1)
+        inside.set()
+        exited.wait()
+        for i in range(2000):           # fresh code objects: each would be a new entry in the record
+            namespace = {}
+            exec(compile(f"def f{i}():\n    return {i}\n", __file__, "exec"), namespace)
+            namespace[f"f{i}"]()
+        main.after(1)
+        done.set()
+
+    with audit.CallRecorder() as rec:
+        thread = threading.Thread(target=worker, daemon=True)
+        thread.start()
+        inside.wait()
+    exited.set()
+    while not done.is_set():
+        rec.executed()
+    thread.join()
+    names = {q for _, q in rec.executed()}
+    assert "during" in names and "after" not in names and "f1999" not in names
