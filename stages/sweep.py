@@ -156,6 +156,7 @@ def plot_sweep(rows: list[dict], out_root: str, rel: str, max_panels: int = 8, f
     for ax in axs.ravel()[len(names):]:
         ax.axis("off")
     fig.tight_layout()
+    fig.set_layout_engine(None)     # laid out: savefig need not draw it once more first
     written = write_output_file(out_root, rel, lambda tmp: fig.savefig(tmp, dpi=100, format="png"),
                                 where="the sweep's values are in the table and its record in the cache")
     plt.close(fig)

@@ -16,7 +16,7 @@ import numpy as np
 from corr_core.open3d_loader import load_open3d
 from corr_core.alignment.render import camera_frames, view_rays
 from corr_core.geometry.primitives import face_normals
-from corr_core.plotting.charts import pyplot
+from corr_core.plotting.charts import pyplot, save_figure
 
 __all__ = ["up_axis", "stand_up", "normalise_for_picture", "render_colored", "project_vertices", "coordinate_colors",
            "pull_back_colors", "crop_box", "plot_landmark_panels", "plot_dense_panels", "plot_azimuths",
@@ -210,36 +210,41 @@ def place_labels(points: np.ndarray, sizes: np.ndarray, bounds: tuple[float, flo
     dirs = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1], [1, 0], [-1, 0], [0, 1], [0, -1],
                      [2, 1], [-2, 1], [2, -1], [-2, -1]], float)
     dirs /= np.linalg.norm(dirs, axis=1)[:, None]
-    placed: list[tuple[float, float, float, float]] = []
+    placed = np.zeros((0, 4))        # (x0, y0, x1, y1) of the labels placed so far
     centres, leader = np.zeros_like(points), np.zeros(len(points), bool)
+    ax_, ay_ = np.abs(dirs[:, 0]), np.abs(dirs[:, 1])
 
-    def cost(box) -> float:
-        x0, y0, x1, y1 = box
-        c = 0.0
-        for a in placed:
-            c += 10.0 * max(0.0, min(x1, a[2]) - max(x0, a[0])) * max(0.0, min(y1, a[3]) - max(y0, a[1]))
-        near = points[(points[:, 0] > x0 - dot) & (points[:, 0] < x1 + dot) & (points[:, 1] > y0 - dot)
-                      & (points[:, 1] < y1 + dot)]
-        c += 0.5 * dot * dot * len(near)
-        out = max(0.0, bounds[0] - x0) + max(0.0, x1 - bounds[2]) + max(0.0, bounds[1] - y0) + max(0.0, y1 - bounds[3])
+    def costs(boxes: np.ndarray) -> np.ndarray:
+        """(m,) cost of each candidate box (m,4): overlap with the labels placed, points covered, outside."""
+        x0, y0, x1, y1 = boxes.T
+        overlap = 10.0 * np.maximum(0.0, np.minimum(x1[:, None], placed[:, 2]) - np.maximum(x0[:, None], placed[:, 0])) \
+            * np.maximum(0.0, np.minimum(y1[:, None], placed[:, 3]) - np.maximum(y0[:, None], placed[:, 1]))
+        # summed in placing order (cumsum runs left to right): the same sums as box by box
+        c = np.cumsum(overlap, axis=1)[:, -1] if len(placed) else np.zeros(len(boxes))
+        px, py = points[:, 0][None, :], points[:, 1][None, :]
+        near = ((px > (x0 - dot)[:, None]) & (px < (x1 + dot)[:, None]) & (py > (y0 - dot)[:, None])
+                & (py < (y1 + dot)[:, None])).sum(axis=1)
+        c += 0.5 * dot * dot * near
+        out = (np.maximum(0.0, bounds[0] - x0) + np.maximum(0.0, x1 - bounds[2]) + np.maximum(0.0, bounds[1] - y0)
+               + np.maximum(0.0, y1 - bounds[3]))
         return c + 50.0 * out * (y1 - y0)
 
     for i, (p, (w, h)) in enumerate(zip(points, sizes)):
         best = None
         for ring in range(10):
-            for d in dirs:
-                # the box's edge (not its centre) at distance dot + ring * step from the point, along d
-                reach = dot + ring * step + 0.5 * abs(d[0]) * w + 0.5 * abs(d[1]) * h
-                c = p + d * reach
-                box = (c[0] - w / 2, c[1] - h / 2, c[0] + w / 2, c[1] + h / 2)
-                score = cost(box) + 1e-3 * ring
-                if best is None or score < best[0]:
-                    best = (score, c, box, ring)
+            # each box's edge (not its centre) at distance dot + ring * step from the point, along each direction
+            reach = dot + ring * step + 0.5 * ax_ * w + 0.5 * ay_ * h
+            c = p + dirs * reach[:, None]
+            boxes = np.stack([c[:, 0] - w / 2, c[:, 1] - h / 2, c[:, 0] + w / 2, c[:, 1] + h / 2], axis=1)
+            score = costs(boxes) + 1e-3 * ring
+            k = int(np.argmin(score))        # the first of equals, as the directions are tried in order
+            if best is None or score[k] < best[0]:
+                best = (score[k], c[k], boxes[k], ring)
             if best[0] < 1e-2:
                 break
         _, centres[i], box, ring = best
         leader[i] = ring > 0
-        placed.append(box)
+        placed = np.vstack([placed, box])
     return centres, leader
 
 
@@ -362,7 +367,8 @@ def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, pred
         if place(k, r)[1] == 0 and n_cols == n_panels:
             ax.set_ylabel(view_name(view, n_views=n_views), fontsize=9)
         labelled.append((ax, xy, right, alpha, xy_true[~right]))
-    fig.canvas.draw()   # the axes take their final (equal-aspect) boxes: labels are placed in final pixels
+    for ax in axes.ravel():
+        ax.apply_aspect()     # the axes take their final (equal-aspect) boxes: labels are placed in final pixels
     for ax, xy, right, alpha, others in labelled:
         _label_points(fig, ax, xy, [str(i + 1) for i in range(len(right))],
                       ["#111" if ok else "#aa0000" for ok in right], alpha, others)
@@ -372,7 +378,7 @@ def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, pred
         lax.text(0.02, 0.5, "\n".join(f"{i + 1:>2} {n}" for i, n in enumerate(names)), fontsize=LABEL_PT,
                  va="center", ha="left", family="monospace", transform=lax.transAxes)
     fig.suptitle(suptitle, fontsize=10)
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path, 90, tight_rect=None, close=False)
     drawn = _drawn(fig, [(ax, title_of(k)) for k, ax in enumerate(a for a, *_ in labelled)])
     plt.close(fig)
     return drawn
@@ -432,10 +438,8 @@ def plot_dense_panels(template: tuple, poses: dict, vertex_maps: dict, captions:
         if k < len(views):
             ax.set_ylabel(view_name(views[r], n_views=n_views), fontsize=9)
     fig.suptitle(suptitle, fontsize=10)
-    fig.tight_layout(rect=(0, 0, 1, 1 - top / fig.get_figheight()))
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path, 90, tight_rect=(0, 0, 1, 1 - top / fig.get_figheight()))
 
 
 def plot_azimuths(true_deg: np.ndarray, recovered_deg: np.ndarray, names: list[str], step_deg: float,
@@ -461,9 +465,7 @@ def plot_azimuths(true_deg: np.ndarray, recovered_deg: np.ndarray, names: list[s
     ax.set_title(f"recovered vs true azimuth: {int((~wrong).sum())}/{len(wrong)} exact", fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path, 100)
 
 
 # ------------------------------------------------------------------------------------ per-method figure sets

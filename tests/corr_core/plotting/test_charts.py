@@ -39,3 +39,25 @@ def test_alignment_plots_are_written(tmp_path, collection):
                                 columns=5)
     for name in ("hog.png", "dij.png", "pairs.png", "grid.png", "sheet.png"):
         assert (tmp_path / name).stat().st_size > 1000
+
+
+def test_a_tightly_laid_out_figure_is_drawn_once_when_saved(tmp_path, monkeypatch):
+    """``save_figure`` lays out and writes with one drawing: matplotlib draws a figure twice when a layout
+    engine is left on it (``tight_layout`` leaves one), a third of a frequency matrix's time."""
+    from matplotlib.figure import Figure
+
+    from corr_core.plotting.charts import save_figure
+
+    draws = []
+    real_draw = Figure.draw
+    monkeypatch.setattr(Figure, "draw", lambda self, renderer: (draws.append(1), real_draw(self, renderer))[1])
+    plt = plotting.pyplot()
+    fig, ax = plt.subplots(figsize=(3, 2))
+    ax.plot([0, 1], [1, 0])
+    ax.set_title("a title")
+    save_figure(fig, tmp_path / "one.png", 80)
+    assert len(draws) == 1 and (tmp_path / "one.png").stat().st_size > 1000
+    draws.clear()
+    F = frequency_matrix([correspondence_matrix(np.array([0, 2, 1]), 3)])
+    plotting.plot_frequency_matrix(F, ["a", "b", "c"], ["a", "b", "c"], "t", tmp_path / "f.png")
+    assert len(draws) == 1
