@@ -29,6 +29,7 @@ from corr_core.correspondence.dense import measures as dense_measures_lib
 from corr_core.correspondence.dense.basis import MeshBasis, map_to_original
 from corr_core.correspondence.dense.refine import LOW_CONFIDENCE
 from corr_core.correspondence.landmarks import read_landmarks, write_landmarks
+from corr_core.geometry.geodesic import GeodesicSolver
 from corr_core.geometry.intrinsic import IntrinsicMesh
 from corr_core.geometry.mesh_io import save_ply
 from corr_core.geometry.sampling import farthest_point_samples
@@ -290,15 +291,18 @@ def dense_measures(template_mesh, target_mesh, landmarks, landmark_files=None, g
     truth, source = _true_map(template_mesh, target_mesh, ground_truth, name)
     out = {"truth": source} if truth is not None else {"no_truth": source}
     Vt, Ft = np.asarray(target_mesh["V"]), np.asarray(target_mesh["F"])
+    solver = None       # the target's geodesic solver, factorized once for every measure below
     if truth is not None:
         sub = IntrinsicMesh(template_mesh["V"], template_mesh["F"])
         vertices = sub.vids[farthest_point_samples(sub.V, min(n_points, len(sub.V)))]
-        out["errors"] = dense_measures_lib.dense_errors(Vt, Ft, maps, truth, vertices=vertices)
+        solver = GeodesicSolver(Vt, Ft)
+        out["errors"] = dense_measures_lib.dense_errors(Vt, Ft, maps, truth, vertices=vertices, solver=solver)
     true_lms = _true_landmarks(template_mesh, target_mesh, landmarks, landmark_files, truth)
     if true_lms is not None:
         ids, _ = read_landmarks(landmarks, n_vertices=len(template_mesh["V"]))
         placed = {k: dense.transfer_landmarks(vm, ids) for k, vm in maps.items() if k in METHODS}
-        pairs = {k: dense_measures_lib.landmark_errors(Vt, Ft, p, true_lms) for k, p in placed.items()}
+        solver = solver if solver is not None or not placed else GeodesicSolver(Vt, Ft)
+        pairs = {k: dense_measures_lib.landmark_errors(Vt, Ft, p, true_lms, solver=solver) for k, p in placed.items()}
         out["landmark_errors"] = {k: e for k, (e, _) in pairs.items()}
         out["nearest"] = {k: n for k, (_, n) in pairs.items()}
     return out
