@@ -253,20 +253,23 @@ def place_labels(points: np.ndarray, sizes: np.ndarray, bounds: tuple[float, flo
 
 
 def _label_points(fig, ax, xy: np.ndarray, texts: list[str], colours: list[str], alphas: np.ndarray,
-                  others: np.ndarray) -> None:
+                  others: np.ndarray, label_sizes: dict | None = None) -> None:
     """Label the points ``xy`` (k,2, data = image pixels) of an axes with ``texts`` at ``LABEL_PT``, placed by
     :func:`place_labels` (away from each other and from ``others`` (n,2), the other marks in the picture) with a
-    thin leader line when a label had to move away from its point."""
+    thin leader line when a label had to move away from its point. ``label_sizes``: {text: (w, h) pixels}
+    measured so far in this figure (the same numbers label every panel), filled in here."""
     if not len(xy):
         return
     renderer = fig.canvas.get_renderer()
     to_px = ax.transData.transform
-    sizes = []
+    label_sizes = {} if label_sizes is None else label_sizes
     for t in texts:
-        probe = ax.text(0, 0, t, fontsize=LABEL_PT, fontweight="bold")
-        bb = probe.get_window_extent(renderer)
-        sizes.append((bb.width + 3, bb.height + 3))   # a little air around each label
-        probe.remove()
+        if t not in label_sizes:
+            probe = ax.text(0, 0, t, fontsize=LABEL_PT, fontweight="bold")
+            bb = probe.get_window_extent(renderer)
+            label_sizes[t] = (bb.width + 3, bb.height + 3)   # a little air around each label
+            probe.remove()
+    sizes = [label_sizes[t] for t in texts]
     pts = to_px(np.asarray(xy, float))
     box = ax.get_window_extent(renderer)
     px_per_pt = fig.dpi / 72.0
@@ -381,9 +384,10 @@ def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, pred
         labelled.append((ax, xy, right, alpha, xy_true[~right]))
     for ax in axes.ravel():
         ax.apply_aspect()     # the axes take their final (equal-aspect) boxes: labels are placed in final pixels
+    label_sizes: dict = {}
     for ax, xy, right, alpha, others in labelled:
         _label_points(fig, ax, xy, [str(i + 1) for i in range(len(right))],
-                      ["#111" if ok else "#aa0000" for ok in right], alpha, others)
+                      ["#111" if ok else "#aa0000" for ok in right], alpha, others, label_sizes)
     if legend:
         lax = fig.add_subplot(grid[:, -1])
         lax.axis("off")
