@@ -41,7 +41,7 @@ import numpy as np
 from .errors import CorruptEntry, UserError, warn_once
 from .cache_root import CACHE_MARKER, CACHE_NAMES, KEY_PATTERN, claim_folder
 from .checksums import file_checksum, json_default, parse_json
-from .codec import copy_arrays, decode, encode, read_checked_arrays, write_array
+from .codec import copy_arrays, decode, encode, read_checked_arrays, write_arrays
 from .manifest import FORMAT_VERSION, manifest_checksum, manifest_problem, same_content
 from .read_cache import READ_CACHE
 from .store import Store
@@ -299,9 +299,8 @@ class ObjectStore(Store):
         writer = uuid.uuid4().hex
         data = self._data(key, writer)
         try:
-            checksums = {}
-            for name, arr in arrays.items():
-                checksums[name] = write_array(self._zarr_store(f"{data}/{name}.zarr", read_only=False), arr)
+            checksums = write_arrays({name: self._zarr_store(f"{data}/{name}.zarr", read_only=False)
+                                      for name in arrays}, arrays)
             files = {}
             if files_dir and os.path.isdir(files_dir):
                 for dirpath, _, filenames in os.walk(files_dir):

@@ -37,7 +37,7 @@ import numpy as np
 
 from .cache_root import CACHE_MARKER, KEY_PATTERN, claim_folder
 from .checksums import ABSENT, atomic_write_text, file_checksum, json_default, read_json_bytes
-from .codec import copy_arrays, decode, encode, read_checked_arrays, write_array
+from .codec import copy_arrays, decode, encode, read_checked_arrays, write_arrays
 from .errors import CorruptEntry, warn_once
 from .manifest import FORMAT_VERSION, manifest_checksum, manifest_problem, same_content
 from .read_cache import READ_CACHE
@@ -201,8 +201,8 @@ class Store:
         if arrays:
             tmp = os.path.join(self.tmp_dir(), "data")
             os.makedirs(tmp)
-            for name, arr in arrays.items():
-                checksums[name] = write_array(zarr.storage.LocalStore(os.path.join(tmp, name + ".zarr")), arr)
+            checksums = write_arrays({name: zarr.storage.LocalStore(os.path.join(tmp, name + ".zarr"))
+                                      for name in arrays}, arrays)
         files = {}
         if files_dir and os.path.isdir(files_dir):
             for dirpath, _, filenames in os.walk(files_dir):
