@@ -102,12 +102,29 @@ def test_kill_9_then_resume_equals_uninterrupted_run(tmp_path):
     _assert_same_final_values(project, slow, clean, work)
 
 
+def _worker_processes(pid: int) -> list:
+    """[(user CPU seconds, process)] of the dask worker processes (started by the nannies) under ``pid``; a child
+    that exits meanwhile, or is a zombie not yet reaped, is left out (reading it raised psutil.ZombieProcess)."""
+    import psutil
+
+    out = []
+    try:
+        children = psutil.Process(pid).children(recursive=True)
+    except psutil.NoSuchProcess:
+        return out
+    for child in children:
+        try:
+            if "spawn_main" in " ".join(child.cmdline()):
+                out.append((child.cpu_times().user, child))
+        except psutil.Error:
+            continue
+    return out
+
+
 def test_a_worker_killed_mid_run_then_resume_equals_uninterrupted_run(tmp_path):
     """SIGKILL to one dask worker process (not the CLI) while tasks run: the run finishes (the task is run again
     elsewhere, or reported failed), nothing stored is lost, and a resumed run gives the values of an
     uninterrupted one."""
-    import psutil
-
     work = "150"
     slow = tmp_path / "killed"
     slow.mkdir()
@@ -121,10 +138,9 @@ def test_a_worker_killed_mid_run_then_resume_equals_uninterrupted_run(tmp_path):
     try:
         while time.time() < deadline and killed is None:
             n = sum(len(f) for _, _, f in os.walk(manifest)) if manifest.exists() else 0
-            workers = [c for c in psutil.Process(proc.pid).children(recursive=True)
-                       if "spawn_main" in " ".join(c.cmdline())]   # the worker processes the nannies start
+            workers = _worker_processes(proc.pid)
             if n >= 4 and workers:
-                killed = max(workers, key=lambda c: c.cpu_times().user)  # the busier one: it runs a task
+                killed = max(workers, key=lambda w: w[0])[1]  # the busier one: it runs a task
                 killed.send_signal(signal.SIGKILL)
             time.sleep(0.05)
         assert killed is not None, "no worker process found mid-run"
