@@ -83,7 +83,9 @@ def write_arrays(stores: dict[str, Any], arrays: dict[str, np.ndarray]) -> dict[
         return zarr_array.create_array(stores[name], shape=arr.shape, dtype=arr.dtype,
                                        chunks=tuple(max(1, c) for c in arr.shape), fill_value=fill_value(arr.dtype))
 
-    _run_together([create(name) for name in contiguous])
+    for failure in _run_together([create(name) for name in contiguous]):
+        if isinstance(failure, Exception):   # raised as one write alone raised it: the entry is not stored
+            raise failure
     return {name: {"sha": array_checksum(arr), "shape": list(arr.shape), "dtype": str(arr.dtype)}
             for name, arr in contiguous.items()}
 

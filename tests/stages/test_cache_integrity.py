@@ -224,3 +224,19 @@ def test_an_edited_generated_dataset_is_detected_and_regenerated(tmp_path, monke
     os.remove(victim)
     run_quiet(p)
     assert open(victim, encoding="utf-8").read() == original
+
+
+def test_an_array_that_cannot_be_written_fails_the_put_and_stores_no_entry(tmp_path, monkeypatch):
+    """The arrays of an entry are written together (stages.codec.write_arrays); one that fails must fail the
+    put, as it did written alone: no manifest may claim data that is not there."""
+    import numpy as np
+    import zarr
+
+    store = Store(str(tmp_path / "cache"))
+    store.claim()
+    local_store = zarr.storage.LocalStore
+    monkeypatch.setattr(zarr.storage, "LocalStore", lambda path, **kw: local_store(path, read_only=True))
+    with pytest.raises(ValueError, match="read-only"):
+        store.put("0" * 32, {"a": np.zeros(3), "b": np.ones(2)}, info={})
+    monkeypatch.undo()
+    assert not store.has("0" * 32)
