@@ -301,7 +301,8 @@ def dense_measures(template_mesh, target_mesh, landmarks, landmark_files=None, g
     if true_lms is not None:
         ids, _ = read_landmarks(landmarks, n_vertices=len(template_mesh["V"]))
         placed = {k: dense.transfer_landmarks(vm, ids) for k, vm in maps.items() if k in METHODS}
-        solver = solver if solver is not None or not placed else GeodesicSolver(Vt, Ft)
+        if placed and solver is None:
+            solver = GeodesicSolver(Vt, Ft)
         pairs = {k: dense_measures_lib.landmark_errors(Vt, Ft, p, true_lms, solver=solver) for k, p in placed.items()}
         out["landmark_errors"] = {k: e for k, (e, _) in pairs.items()}
         out["nearest"] = {k: n for k, (_, n) in pairs.items()}

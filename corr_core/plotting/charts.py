@@ -43,10 +43,6 @@ def save_figure(fig, path: str | os.PathLike, dpi: int, *, tight_rect: tuple | N
         pyplot().close(fig)
 
 
-def _save(fig, path: str | os.PathLike, dpi: int) -> None:
-    save_figure(fig, path, dpi)
-
-
 def _axes_off(ax) -> None:
     """No frame, ticks or tick labels on ``ax`` (a picture): ``axis("off")``, and its axes hidden too, so that
     laying the figure out does not measure the tick labels it will not draw (same pixels, a fifth faster)."""
@@ -79,7 +75,7 @@ def plot_hog_drawings(views: dict, features: dict, shapes: list[str], view_ids: 
                 axes[r, 2 * c + 1].set_title("HoG", fontsize=8)
     for ax in axes.ravel():
         _axes_off(ax)
-    _save(fig, path, 90)
+    save_figure(fig, path, 90)
 
 
 def plot_pair_cost_heatmap(C_ab: np.ndarray, a: str, b: str, path) -> None:
@@ -93,7 +89,7 @@ def plot_pair_cost_heatmap(C_ab: np.ndarray, a: str, b: str, path) -> None:
     ax.set_ylabel(f"label t1 of {a}")
     ax.set_title(f"D_ij(t1,t2) = C_ij(t2-t1), {a} vs {b}")
     fig.colorbar(im, ax=ax)
-    _save(fig, path, 90)
+    save_figure(fig, path, 90)
 
 
 def plot_view_pairs(views_a: np.ndarray, views_b: np.ndarray, features_a: np.ndarray, features_b: np.ndarray,
@@ -109,7 +105,7 @@ def plot_view_pairs(views_a: np.ndarray, views_b: np.ndarray, features_a: np.nda
             axes[r, c].imshow(stack[k], cmap="gray", vmin=0, vmax=255)
             axes[r, c].set_title(f"{title}: {shape} view {k}" + (f" (d={d[pair]:.1f})" if c else ""), fontsize=8)
             _axes_off(axes[r, c])
-    _save(fig, path, 90)
+    save_figure(fig, path, 90)
 
 
 def plot_aligned_grid(views: dict, labels: dict, shapes: list[str], path) -> None:
@@ -122,7 +118,7 @@ def plot_aligned_grid(views: dict, labels: dict, shapes: list[str], path) -> Non
     for ax in axes.ravel():
         _axes_off(ax)
     fig.suptitle("aligned shapes (common view 0)")
-    _save(fig, path, 90)
+    save_figure(fig, path, 90)
 
 
 def plot_contact_sheet(views: dict, names: list[str], labels: np.ndarray, path, *, columns: int = 10) -> None:
@@ -135,7 +131,7 @@ def plot_contact_sheet(views: dict, names: list[str], labels: np.ndarray, path, 
     for ax, n, l in zip(axes.ravel(), names, labels):
         ax.imshow(views[n][aligned_view_index(int(l), len(views[n]))], cmap="gray", vmin=0, vmax=255)
         ax.set_title(n, fontsize=9)
-    _save(fig, path, 80)
+    save_figure(fig, path, 80)
 
 
 # ------------------------------------------------------------------------------------------- correspondence
@@ -155,7 +151,7 @@ def plot_frequency_matrix(freq: np.ndarray, names_rows, names_cols, title: str, 
                 color="black" if freq[i, a] > 0.6 else "white")
     ax.set_title(title)
     fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="fraction of test meshes")
-    _save(fig, path, 130)
+    save_figure(fig, path, 130)
 
 
 def plot_error_curves(curves: dict, path, title: str = "Geodesic error (Kim et al. 2011)") -> None:
@@ -173,7 +169,7 @@ def plot_error_curves(curves: dict, path, title: str = "Geodesic error (Kim et a
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right", fontsize=8)
     ax.set_title(title)
-    _save(fig, path, 130)
+    save_figure(fig, path, 130)
 
 
 def plot_accuracy_bars(accuracy: dict[str, float], path) -> None:
@@ -188,4 +184,4 @@ def plot_accuracy_bars(accuracy: dict[str, float], path) -> None:
     ax.set_ylabel("accuracy")
     ax.set_title("landmark accuracy per method")
     plt.setp(ax.get_xticklabels(), rotation=20, ha="right")
-    _save(fig, path, 110)
+    save_figure(fig, path, 110)
