@@ -18,3 +18,41 @@ def nearest_compatible(tree: cKDTree, normals_t: np.ndarray, P: np.ndarray, norm
     best = np.argmin(d, axis=1)
     rows = np.arange(len(P))
     return c[rows, best], d[rows, best]
+
+
+class VertexNeighbourhoods:
+    """The ``k`` vertices nearest (3D) to each of a mesh's vertices, each vertex's row found by one k-d tree query
+    the first time it is asked for and then kept. A refinement asks for the neighbourhoods of a map's images in
+    every round (``refine.upsample_spectral``, ``refine.refine_spectral``), and most images repeat: within a map
+    (an upsampled map has one image per template sample) and from one round or starting map to the next. The rows
+    are those of ``cKDTree(V).query(V[ids], k)``, bit for bit (a query's answer depends only on its point).
+
+    ``VertexNeighbourhoods(V, k)``: V (n,3) float; k clipped to n. ``of(ids)``: ids (q,) int vertex ids ->
+    (q, k) int neighbour ids, nearest first."""
+
+    def __init__(self, V: np.ndarray, k: int):
+        self.V = np.asarray(V, dtype=np.float64)
+        self.k = int(min(k, len(self.V)))
+        if self.k < 1:
+            raise ValueError(f"VertexNeighbourhoods: need k >= 1 and at least one vertex, got k={k}, {len(V)} "
+                             f"vertices")
+        self._tree = cKDTree(self.V)
+        self._rows = np.empty((len(self.V), self.k), dtype=np.int64)
+        self._known = np.zeros(len(self.V), dtype=bool)
+
+    def of(self, ids: np.ndarray) -> np.ndarray:
+        """(q, k) int: the k nearest vertices of each vertex of ``ids`` (q,) int."""
+        ids = np.asarray(ids, dtype=np.int64)
+        new = np.unique(ids[~self._known[ids]])
+        if len(new):
+            _, rows = self._tree.query(self.V[new], k=self.k)
+            self._rows[new] = rows.reshape(len(new), self.k)
+            self._known[new] = True
+        return self._rows[ids]
+
+
+def vertex_neighbourhoods(basis, k: int) -> VertexNeighbourhoods:
+    """The ``VertexNeighbourhoods`` of a ``MeshBasis``'s vertices for ``k``, made once per basis (cached on it: the
+    starting maps of a pair and every refinement step share it)."""
+    k = int(min(k, basis.n))
+    return basis.cached(("vertex_neighbourhoods", k), lambda: VertexNeighbourhoods(basis.V, k))

@@ -38,7 +38,7 @@ from scipy.spatial import cKDTree
 from corr_core.correspondence.dense.basis import MeshBasis, map_to_local
 from corr_core.correspondence.dense.deform import refine_deform, refine_settle
 from corr_core.correspondence.dense.fmaps import fmap_from_p2p
-from corr_core.correspondence.dense.nearest import nearest_compatible
+from corr_core.correspondence.dense.nearest import nearest_compatible, vertex_neighbourhoods
 from corr_core.geometry.primitives import unique_edges, vertex_normals
 
 
@@ -48,11 +48,18 @@ def _local_spectral_match(emb_s: np.ndarray, emb_t: np.ndarray, cands: np.ndarra
     emb_s = emb_s.astype(np.float32)
     emb_t = emb_t.astype(np.float32)
     out = np.empty(len(cands), dtype=np.int64)
-    for s in range(0, len(cands), 2048):                                 # chunks bound memory (c * d each)
-        c = cands[s:s + 2048]
-        d = np.sum((emb_t[c] - emb_s[s:s + 2048, None, :]) ** 2, axis=2)
-        out[s:s + 2048] = c[np.arange(len(c)), np.argmin(d, axis=1)]
+    for s in range(0, len(cands), _MATCH_ROWS):
+        c = cands[s:s + _MATCH_ROWS]
+        diff = emb_t[c]                                                  # (b, c, d), squared in place
+        diff -= emb_s[s:s + _MATCH_ROWS, None, :]
+        diff *= diff
+        out[s:s + _MATCH_ROWS] = c[np.arange(len(c)), np.argmin(diff.sum(axis=2), axis=1)]
     return out
+
+
+# Rows per block of _local_spectral_match: a block (128 rows x 32 candidates x 100 dims in float32, 1.6 MB) stays
+# in cache, and squared in place it needs no temporary; each row's sum is the same, bit for bit, in any block size.
+_MATCH_ROWS = 128
 
 
 def refine_spectral(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, k: int | None = None,
@@ -69,11 +76,10 @@ def refine_spectral(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, k:
     """
     p2p = np.asarray(p2p, dtype=np.int64).copy()
     k = int(min(k or source.evecs.shape[1], source.evecs.shape[1], target.evecs.shape[1]))
-    tree = cKDTree(target.V)
-    n_candidates = min(n_candidates, target.n)
+    neighbourhoods = vertex_neighbourhoods(target, n_candidates)
     for _ in range(iterations):
         C = fmap_from_p2p(p2p, source.evecs[:, :k], target.evecs[:, :k])
-        _, cands = tree.query(target.V[p2p], k=n_candidates)
+        cands = neighbourhoods.of(p2p)
         new = _local_spectral_match(source.evecs[:, :k], target.evecs[:, :k] @ C.T, cands)
         if np.array_equal(new, p2p):
             break
@@ -98,8 +104,7 @@ def upsample_spectral(source: MeshBasis, target: MeshBasis, C: np.ndarray, p2p_s
     samples = source.samples[:len(p2p_samples)]
     _, nearest_sample = cKDTree(source.V[samples]).query(source.V)
     start = np.asarray(p2p_samples)[nearest_sample]
-    n_candidates = min(n_candidates, target.n)
-    _, cands = cKDTree(target.V).query(target.V[start], k=n_candidates)   # (n_s, c)
+    cands = vertex_neighbourhoods(target, n_candidates).of(start)           # (n_s, c)
     ks, kt = C.shape
     return _local_spectral_match(source.evecs[:, :ks], target.evecs[:, :kt] @ C.T, cands)
 
@@ -130,11 +135,10 @@ def refine_geodesic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, n_
     far = np.where(D_s >= min_anchor_distance, D_s, np.inf)
     near = np.argsort(far, axis=0, kind="stable")[:n_near].T              # (n_s, n_near) anchor indices
     d_src = np.take_along_axis(D_s.T, near, axis=1)                        # (n_s, n_near)
-    tree = cKDTree(target.V)
-    n_candidates = min(n_candidates, target.n)
+    neighbourhoods = vertex_neighbourhoods(target, n_candidates)
     for _ in range(iterations):
         D_t = target.distances(p2p[anchors]).T                              # (n_t, n_anchors)
-        _, cands = tree.query(target.V[p2p], k=n_candidates)                 # (n_s, c)
+        cands = neighbourhoods.of(p2p)                                       # (n_s, c)
         new = np.empty_like(p2p)
         for s in range(0, source.n, 2048):
             c = cands[s:s + 2048]                                             # (b, c)
@@ -207,12 +211,9 @@ def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, n
     p2p = np.asarray(p2p, dtype=np.int64).copy()
     n_patches = min(n_patches, len(source.samples))
     patch_size = min(patch_size, len(source.samples))
-    D_c = source.sample_distances(n_patches)                        # (n_patches, n_s)
-    owner = np.argmin(D_c, axis=0)                                   # nearest patch centre of every vertex
-    near = np.argsort(D_c[:, source.samples], axis=1, kind="stable")[:, :patch_size]
-    members = source.samples[near]                                   # (n_patches, patch_size) vertex ids
+    owner, members = _patches(source, n_patches, patch_size)
     X = source.V[members]                                            # (b, p, 3)
-    N_s, N_t = vertex_normals(source.V, source.F), vertex_normals(target.V, target.F)
+    N_s, N_t = _vertex_normals(source), _vertex_normals(target)
     tree = cKDTree(target.V)
     for _ in range(rounds):
         R, t = _robust_kabsch_batch(X, target.V[p2p[members]])
@@ -229,6 +230,29 @@ def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, n
             break
         p2p = new
     return p2p
+
+
+def _patches(source: MeshBasis, n_patches: int, patch_size: int) -> tuple[np.ndarray, np.ndarray]:
+    """``refine_extrinsic``'s patches of the template, made once per basis (every starting map of a target gets
+    the step): the nearest patch centre of every vertex (n_s,) int and the members of every patch
+    (n_patches, patch_size) int vertex ids, the template samples geodesically nearest to its centre."""
+    def make() -> tuple[np.ndarray, np.ndarray]:
+        D_c = source.sample_distances(n_patches)                    # (n_patches, n_s)
+        owner = np.argmin(D_c, axis=0)
+        near = np.argsort(D_c[:, source.samples], axis=1, kind="stable")[:, :patch_size]
+        return _read_only(owner), _read_only(source.samples[near])
+    return source.cached(("patches", n_patches, patch_size), make)
+
+
+def _vertex_normals(basis: MeshBasis) -> np.ndarray:
+    """The basis's vertex normals (n,3) float, made once per basis."""
+    return basis.cached("vertex_normals", lambda: _read_only(vertex_normals(basis.V, basis.F)))
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """``a``, no longer writable: an array cached on a basis is shared by every later call."""
+    a.setflags(write=False)
+    return a
 
 
 def _icp_pairs(tree: cKDTree, normals_t: np.ndarray, moved: np.ndarray, patch_normals: np.ndarray, R: np.ndarray,
@@ -260,8 +284,7 @@ def _assign(tree: cKDTree, target: MeshBasis, p2p: np.ndarray, moved: np.ndarray
     if n_candidates is None:
         new, d = nearest_compatible(tree, normals_t, moved, moved_normals, min_cos=0.0)
         return np.where(np.isfinite(d), new, p2p)
-    _, cands = tree.query(target.V[p2p], k=min(n_candidates, target.n))
-    cands = cands.reshape(len(p2p), -1)
+    cands = vertex_neighbourhoods(target, n_candidates).of(p2p)
     d = np.linalg.norm(target.V[cands] - moved[:, None, :], axis=2)
     return cands[np.arange(len(p2p)), np.argmin(d, axis=1)]
 

@@ -6,7 +6,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from corr_core.correspondence.dense import measures, mesh_basis, refine_extrinsic
-from corr_core.correspondence.dense.nearest import nearest_compatible
+from corr_core.correspondence.dense.nearest import VertexNeighbourhoods, nearest_compatible
 
 FAST = {"n_patches": 120, "rounds": 5}
 
@@ -57,6 +57,27 @@ def test_nearest_compatible_skips_a_part_facing_the_other_way():
     assert ids[0] < len(g) and np.isclose(d[0], 0.08)
     ids, d = nearest_compatible(cKDTree(V), N, P, -NP, min_cos=0.5, k=4)
     assert ids[0] >= len(g)
+
+
+def test_vertex_neighbourhoods_are_the_k_d_tree_rows_each_found_once():
+    """The kept rows equal a fresh query of the same vertices, bit for bit, in a second call that asks for old
+    and new vertices (repeats included); only vertices never asked for are queried; k is clipped to the count."""
+    rng = np.random.default_rng(3)
+    V = rng.random((400, 3))
+    V[7] = V[8]                                              # a duplicate vertex: ties keep the tree's order
+    table = VertexNeighbourhoods(V, 12)
+    queried, tree = [], table._tree
+
+    class CountingTree:
+        def query(self, P, k):
+            queried.append(len(P))
+            return tree.query(P, k=k)
+    table._tree = CountingTree()
+    first, second = rng.integers(0, 400, 300), np.concatenate([rng.integers(0, 400, 200), [7, 8, 7]])
+    for ids in (first, second):
+        assert np.array_equal(table.of(ids), cKDTree(V).query(V[ids], k=12)[1])
+    assert queried == [len(np.unique(first)), len(np.setdiff1d(second, first))]
+    assert VertexNeighbourhoods(V[:5], 12).of(np.arange(5)).shape == (5, 5)
 
 
 def test_refine_map_runs_the_named_steps_in_order_and_rejects_unknown_ones(pair):
