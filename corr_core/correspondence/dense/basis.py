@@ -22,7 +22,7 @@ import scipy.sparse.linalg as sla
 from corr_core.geometry import geodesic
 from corr_core.geometry.intrinsic import IntrinsicMesh
 from corr_core.geometry.laplacian import laplacian_and_mass, start_vector
-from corr_core.geometry.primitives import face_areas, face_normals
+from corr_core.geometry.primitives import face_areas, face_normals, vertex_normals
 from corr_core.geometry.sampling import farthest_point_samples
 
 
@@ -70,6 +70,15 @@ class MeshBasis:
     def scale(self) -> float:
         """sqrt(surface area): the length unit of normalized distances."""
         return float(np.sqrt(self.area))
+
+    def normals(self) -> np.ndarray:
+        """Unit vertex normals (n,3) float (``primitives.vertex_normals``), made on first use and then shared,
+        read-only, by every refinement step and starting map of this mesh."""
+        def make() -> np.ndarray:
+            N = vertex_normals(self.V, self.F)
+            N.setflags(write=False)
+            return N
+        return self.cached("vertex_normals", make)
 
     def solver(self):
         """The heat-method geodesic solver of this mesh (built on first use, then reused)."""

@@ -135,7 +135,7 @@ class _Target:
 
     def __init__(self, basis: MeshBasis):
         self.V = basis.V
-        self.normals = vertex_normals(basis.V, basis.F)
+        self.normals = basis.normals()
         self.tree = cKDTree(basis.V)
 
     def data_goal(self, X: np.ndarray, normals_X: np.ndarray, anchors: np.ndarray, anchor_weight: float,

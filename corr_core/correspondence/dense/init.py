@@ -226,14 +226,12 @@ def orientation_agreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.
     ``neighbours`` nearest samples (3D), both sides expressed in right-handed tangent frames (t1, t2, outward
     normal); its determinant is positive when the map keeps the orientation. Returns the mean sign.
     """
-    from corr_core.geometry.primitives import vertex_normals
-
     X = source.V[source.samples]
     Y = target.V[np.asarray(p2p_samples)]
     _, nb = cKDTree(X).query(X, k=min(neighbours + 1, len(X)))
     nb = nb[:, 1:]
-    s1, s2 = _tangent_frames(vertex_normals(source.V, source.F)[source.samples])
-    r1, r2 = _tangent_frames(vertex_normals(target.V, target.F)[np.asarray(p2p_samples)])
+    s1, s2 = _tangent_frames(source.normals()[source.samples])
+    r1, r2 = _tangent_frames(target.normals()[np.asarray(p2p_samples)])
     P = X[nb] - X[:, None, :]                                           # (p, k, 3)
     Q = Y[nb] - Y[:, None, :]
     P2 = np.stack([np.einsum("pkc,pc->pk", P, s1), np.einsum("pkc,pc->pk", P, s2)], axis=2)   # (p, k, 2)

@@ -39,7 +39,7 @@ from corr_core.correspondence.dense.basis import MeshBasis, map_to_local
 from corr_core.correspondence.dense.deform import refine_deform, refine_settle
 from corr_core.correspondence.dense.fmaps import fmap_from_p2p
 from corr_core.correspondence.dense.nearest import nearest_compatible, vertex_neighbourhoods
-from corr_core.geometry.primitives import unique_edges, vertex_normals
+from corr_core.geometry.primitives import unique_edges
 
 
 def _local_spectral_match(emb_s: np.ndarray, emb_t: np.ndarray, cands: np.ndarray) -> np.ndarray:
@@ -213,7 +213,7 @@ def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, n
     patch_size = min(patch_size, len(source.samples))
     owner, members = _patches(source, n_patches, patch_size)
     X = source.V[members]                                            # (b, p, 3)
-    N_s, N_t = _vertex_normals(source), _vertex_normals(target)
+    N_s, N_t = source.normals(), target.normals()
     tree = cKDTree(target.V)
     for _ in range(rounds):
         R, t = _robust_kabsch_batch(X, target.V[p2p[members]])
@@ -242,11 +242,6 @@ def _patches(source: MeshBasis, n_patches: int, patch_size: int) -> tuple[np.nda
         near = np.argsort(D_c[:, source.samples], axis=1, kind="stable")[:, :patch_size]
         return _read_only(owner), _read_only(source.samples[near])
     return source.cached(("patches", n_patches, patch_size), make)
-
-
-def _vertex_normals(basis: MeshBasis) -> np.ndarray:
-    """The basis's vertex normals (n,3) float, made once per basis."""
-    return basis.cached("vertex_normals", lambda: _read_only(vertex_normals(basis.V, basis.F)))
 
 
 def _read_only(a: np.ndarray) -> np.ndarray:
