@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse.linalg as sla
+from scipy.spatial import cKDTree
 
 from corr_core.geometry import geodesic
 from corr_core.geometry.intrinsic import IntrinsicMesh
@@ -79,6 +80,11 @@ class MeshBasis:
             N.setflags(write=False)
             return N
         return self.cached("vertex_normals", make)
+
+    def tree(self) -> cKDTree:
+        """A k-d tree of the vertices (n,3), made on first use and then shared by every refinement step and
+        starting map of this mesh (a query's answer depends only on its point, so sharing changes no result)."""
+        return self.cached("vertex_tree", lambda: cKDTree(self.V))
 
     def solver(self):
         """The heat-method geodesic solver of this mesh (built on first use, then reused)."""

@@ -18,7 +18,6 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
-from scipy.spatial import cKDTree
 
 from corr_core.correspondence.dense.basis import MeshBasis
 from corr_core.correspondence.dense.nearest import nearest_compatible
@@ -136,7 +135,7 @@ class _Target:
     def __init__(self, basis: MeshBasis):
         self.V = basis.V
         self.normals = basis.normals()
-        self.tree = cKDTree(basis.V)
+        self.tree = basis.tree()
 
     def data_goal(self, X: np.ndarray, normals_X: np.ndarray, anchors: np.ndarray, anchor_weight: float,
                   outlier: float, normal_cos: float) -> np.ndarray:

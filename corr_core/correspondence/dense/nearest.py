@@ -27,16 +27,17 @@ class VertexNeighbourhoods:
     (an upsampled map has one image per template sample) and from one round or starting map to the next. The rows
     are those of ``cKDTree(V).query(V[ids], k)``, bit for bit (a query's answer depends only on its point).
 
-    ``VertexNeighbourhoods(V, k)``: V (n,3) float; k clipped to n. ``of(ids)``: ids (q,) int vertex ids ->
+    ``VertexNeighbourhoods(V, k, tree=None)``: V (n,3) float; k clipped to n; tree: a ``cKDTree`` of V to share
+    (None: one is made). ``of(ids)``: ids (q,) int vertex ids ->
     (q, k) int neighbour ids, nearest first."""
 
-    def __init__(self, V: np.ndarray, k: int):
+    def __init__(self, V: np.ndarray, k: int, tree: cKDTree | None = None):
         self.V = np.asarray(V, dtype=np.float64)
         self.k = int(min(k, len(self.V)))
         if self.k < 1:
             raise ValueError(f"VertexNeighbourhoods: need k >= 1 and at least one vertex, got k={k}, {len(V)} "
                              f"vertices")
-        self._tree = cKDTree(self.V)
+        self._tree = cKDTree(self.V) if tree is None else tree
         self._rows = np.empty((len(self.V), self.k), dtype=np.int64)
         self._known = np.zeros(len(self.V), dtype=bool)
 
@@ -55,4 +56,4 @@ def vertex_neighbourhoods(basis, k: int) -> VertexNeighbourhoods:
     """The ``VertexNeighbourhoods`` of a ``MeshBasis``'s vertices for ``k``, made once per basis (cached on it: the
     starting maps of a pair and every refinement step share it)."""
     k = int(min(k, basis.n))
-    return basis.cached(("vertex_neighbourhoods", k), lambda: VertexNeighbourhoods(basis.V, k))
+    return basis.cached(("vertex_neighbourhoods", k), lambda: VertexNeighbourhoods(basis.V, k, basis.tree()))

@@ -214,7 +214,7 @@ def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, n
     owner, members = _patches(source, n_patches, patch_size)
     X = source.V[members]                                            # (b, p, 3)
     N_s, N_t = source.normals(), target.normals()
-    tree = cKDTree(target.V)
+    tree = target.tree()
     for _ in range(rounds):
         R, t = _robust_kabsch_batch(X, target.V[p2p[members]])
         for _ in range(icp_iterations):
