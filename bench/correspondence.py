@@ -32,6 +32,9 @@ The summary also lists the flipped targets (landmark accuracy < 0.5: a mirrored 
 
 Run:  python bench/correspondence.py [--data SCAPE] [--pairs N] [--json OUT]
                                      [--methods pyfm_none,pyfm_5pts,dense_sparse,dense_auto] [--refine PLAN]
+                                     [--save-maps DIR]
+          (--save-maps: every method's map as DIR/<method>/<mesh>.txt, one target vertex id (0-based) a line per
+          template vertex, e.g. for ``bench/remesh_scape.py --carry DIR``)
       python bench/correspondence.py --summarize OUT.json [OUT2.json ...] [--relative-to BASE.json ...]
           (the table of saved, possibly partial, runs; several files: their methods side by side on the pairs they
           share, e.g. the project's methods and pyFM run one after the other, the CPU-time ratios then compare two
@@ -255,6 +258,14 @@ def summarize(paths: list[str], relative_to: list[str] | None = None) -> int:
     return 0
 
 
+def save_maps(folder: str, mesh: str, maps: dict) -> None:
+    """Write each method's map {method: (n_s,) int target vertex ids} as folder/<method>/<mesh>.txt, one id a line
+    (``numpy.loadtxt(..., dtype=int)`` reads it back)."""
+    for method, p2p in maps.items():
+        os.makedirs(os.path.join(folder, method), exist_ok=True)
+        np.savetxt(os.path.join(folder, method, f"{mesh}.txt"), np.asarray(p2p, dtype=np.int64), fmt="%d")
+
+
 def _limit_threads() -> None:
     """Cap BLAS/OpenMP pools at one thread even when numpy was loaded before this module (threadpoolctl, when
     installed; the environment variables set at import cover the normal ``python bench/correspondence.py``)."""
@@ -274,6 +285,8 @@ def main(argv=None) -> int:
     ap.add_argument("--refine", default=None, help="the dense methods' refinement plan (refine.refine_plan, e.g. "
                     "extrinsic+deform; default: dense_map's)")
     ap.add_argument("--json", default=None, help="write per-pair and summary results here")
+    ap.add_argument("--save-maps", default=None, metavar="DIR",
+                    help="also write every map as DIR/<method>/<mesh>.txt (one target vertex id a line)")
     ap.add_argument("--summarize", default=None, nargs="+", metavar="JSON",
                     help="only print the table of --json files (several: merged on their common pairs)")
     ap.add_argument("--relative-to", default=None, nargs="+", metavar="JSON",
@@ -340,6 +353,8 @@ def main(argv=None) -> int:
                 else:
                     maps[m] = dense_map(Vs, Fs, Vt, Ft, basis_template=S, basis_target=T, **plan)
             seconds[m] = time.process_time() - t0
+        if args.save_maps:
+            save_maps(args.save_maps, name, maps)
         solver = GeodesicSolver(Vt, Ft)
         errs = measures.dense_errors(Vt, Ft, maps, given["truth"], vertices=eval_vertices, solver=solver)
         row = {"mesh": name}

@@ -26,12 +26,22 @@ point of a triangle, not a vertex), that point of the original pose, and its nea
 best map a method can return on these meshes; its error is what the ground truth's snap to original vertices
 costs every method.
 
+With ``--carry MAPS`` (no remeshing: the set in ``--out`` is scored): maps between the *original* meshes
+(``bench/correspondence.py --save-maps MAPS`` on the course data, MAPS/<method>/<pose>.txt) carried to the
+remeshed meshes (``carried_map``: the closest point of the original template, the same barycentric combination of
+its corners' images, the nearest remeshed pose vertex) and scored like the exact map: what a method exactly as
+accurate as on the original meshes scores on this set, the reference its own remeshed errors are compared with.
+
 Run:  python bench/remesh_scape.py [--data SCAPE] [--out /tmp/scape_remeshed] [--seed 0] [--poses N] [--floor]
+      python bench/remesh_scape.py --carry MAPS [--out /tmp/scape_remeshed] [--poses N] [--against REM.json]
+          (--against: the methods' own errors on the remeshed set, bench/correspondence.py --json REM.json --data
+          /tmp/scape_remeshed, or on the original meshes, against their carried errors)
 """
 from __future__ import annotations
 
 import argparse
 import glob
+import json
 import os
 import shutil
 import sys
@@ -96,11 +106,11 @@ def true_map(V_template_new: np.ndarray, V_template: np.ndarray, V_pose: np.ndar
     return truth, d_template, d_pose
 
 
-def exact_map(V_template_new: np.ndarray, V_template: np.ndarray, F_template: np.ndarray, V_pose: np.ndarray,
-              V_pose_new: np.ndarray) -> np.ndarray:
-    """Remeshed template vertices (n_s,3) -> closest points on the original template (V_template (n,3),
-    F_template (m,3)) -> the same barycentric points of the original pose (V_pose (n,3), same triangles) ->
-    nearest remeshed pose vertex of V_pose_new (n_t,3): (n_s,) int64 (Open3D's closest-point query)."""
+def closest_surface_points(V_template_new: np.ndarray, V_template: np.ndarray, F_template: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray]:
+    """Closest point of the original template's surface (V_template (n,3), F_template (m,3)) to each remeshed
+    template vertex (n_s,3), Open3D's closest-point query: its triangle's corners (n_s,3) int64 (original vertex
+    ids) and barycentric coordinates (n_s,3) float."""
     from corr_core.open3d_loader import load_open3d
 
     o3d = load_open3d()
@@ -108,16 +118,52 @@ def exact_map(V_template_new: np.ndarray, V_template: np.ndarray, F_template: np
     scene.add_triangles(o3d.core.Tensor(np.asarray(V_template, np.float32)),
                         o3d.core.Tensor(np.asarray(F_template, np.uint32)))
     hit = scene.compute_closest_points(o3d.core.Tensor(np.asarray(V_template_new, np.float32)))
-    tri = np.asarray(F_template)[hit["primitive_ids"].numpy().astype(np.int64)]          # (n_s, 3)
+    corners = np.asarray(F_template, np.int64)[hit["primitive_ids"].numpy().astype(np.int64)]
     u, v = hit["primitive_uvs"].numpy().astype(np.float64).T
-    bary = np.stack([1 - u - v, u, v], axis=1)
-    points = np.einsum("pk,pkd->pd", bary, np.asarray(V_pose, np.float64)[tri])
+    return corners, np.stack([1 - u - v, u, v], axis=1)
+
+
+def exact_map(V_template_new: np.ndarray, V_template: np.ndarray, F_template: np.ndarray, V_pose: np.ndarray,
+              V_pose_new: np.ndarray) -> np.ndarray:
+    """Remeshed template vertices (n_s,3) -> closest points on the original template (V_template (n,3),
+    F_template (m,3)) -> the same barycentric points of the original pose (V_pose (n,3), same triangles) ->
+    nearest remeshed pose vertex of V_pose_new (n_t,3): (n_s,) int64. ``carried_map`` of the identity map."""
+    return carried_map(V_template_new, V_template, F_template, np.arange(len(V_template)), V_pose, V_pose_new)
+
+
+def carried_map(V_template_new: np.ndarray, V_template: np.ndarray, F_template: np.ndarray, p2p: np.ndarray,
+                V_pose: np.ndarray, V_pose_new: np.ndarray) -> np.ndarray:
+    """A map between the original meshes carried to the remeshed ones: each remeshed template vertex (n_s,3) ->
+    its closest point on the original template (V_template (n,3), F_template (m,3)) -> the barycentric
+    combination of the images ``p2p`` (n,) int (original template vertex -> original pose vertex of V_pose
+    (n_p,3)) of that triangle's corners -> the nearest remeshed pose vertex of V_pose_new (n_t,3): (n_s,) int64.
+
+    It scores what a map exactly as accurate as ``p2p`` is on the original meshes scores on these meshes,
+    whose coarser vertices and snapped ground truth add their own error (the identity map gives ``exact_map``)."""
+    p2p = np.asarray(p2p, np.int64)
+    corners, bary = closest_surface_points(V_template_new, V_template, F_template)
+    images = p2p[corners]
+    if (images < 0).any() or (images >= len(V_pose)).any():
+        raise ValueError(f"carried_map: the map sends vertices the remeshed template needs to no pose vertex "
+                         f"(ids outside 0..{len(V_pose) - 1})")
+    points = np.einsum("pk,pkd->pd", bary, np.asarray(V_pose, np.float64)[images])
     return nearest(points, V_pose_new)[0]
 
 
 def floor_errors(out: str, data: str, names: list[str]) -> dict:
     """{pose: mean error of ``exact_map`` against ground_truth/<pose>.txt} (geodesic on the remeshed pose /
     sqrt(its area), at the 2,000 farthest-point template vertices bench/correspondence.py evaluates), printed."""
+    return remeshed_errors(out, data, names)["exact"]
+
+
+def remeshed_errors(out: str, data: str, names: list[str], maps_dir: str | None = None) -> dict:
+    """Mean errors on the remeshed set ``out`` (of the course set ``data``) against ground_truth/<pose>.txt,
+    measured as bench/correspondence.py measures (geodesic on the remeshed pose / sqrt(its area) at the 2,000
+    farthest-point template vertices), printed per pose and on average: of ``exact_map`` ("exact"), and with
+    ``maps_dir`` of every map between the original meshes in maps_dir/<method>/<pose>.txt (as
+    ``bench/correspondence.py --save-maps`` writes them) carried by ``carried_map`` (label: the method).
+
+    Returns {label: {pose: mean error}} (a method without a file for a pose is left out there)."""
     from corr_core.correspondence.dense import basis as dense_basis
     from corr_core.correspondence.dense import measures
     from corr_core.geometry.mesh_io import load_mesh
@@ -126,18 +172,52 @@ def floor_errors(out: str, data: str, names: list[str]) -> dict:
     Vs2, Fs2 = load_mesh(os.path.join(out, "meshes", "template", "mesh000.obj"))
     S = dense_basis.mesh_basis(Vs2, Fs2, k=100)
     vertices = S.vids[S.samples[:2000]]
-    floors = {}
+    methods = sorted(os.listdir(maps_dir)) if maps_dir else []
+    means: dict = {"exact": {}, **{m: {} for m in methods}}
     for name in names:
         Vt, _ = load_mesh(os.path.join(data, "meshes", "test", f"{name}.obj"))
         Vt2, Ft2 = load_mesh(os.path.join(out, "meshes", "test", f"{name}.obj"))
         truth = np.loadtxt(os.path.join(out, "ground_truth", f"{name}.txt"), dtype=np.int64)
-        exact = exact_map(Vs2, Vs, Fs, Vt, Vt2)
-        errs = measures.dense_errors(Vt2, Ft2, {"exact": exact}, truth, vertices=vertices)["exact"]
-        floors[name] = float(errs.mean())
-        print(f"{name:<8} exact map against the ground truth: mean {errs.mean():.5f}, within 0.05 "
-              f"{np.mean(errs <= 0.05):.3f}", flush=True)
-    print(f"{'poses':<8} exact map against the ground truth: mean {np.mean(list(floors.values())):.5f}")
-    return floors
+        maps = {"exact": exact_map(Vs2, Vs, Fs, Vt, Vt2)}
+        for m in methods:
+            path = os.path.join(maps_dir, m, f"{name}.txt")
+            if os.path.isfile(path):
+                p2p = np.loadtxt(path, dtype=np.int64)
+                if p2p.shape != (len(Vs),):
+                    raise SystemExit(f"{path}: {p2p.shape[0]} ids, the original template has {len(Vs)} vertices: "
+                                     f"not a map of {data}")
+                maps[m] = carried_map(Vs2, Vs, Fs, p2p, Vt, Vt2)
+        errs = measures.dense_errors(Vt2, Ft2, maps, truth, vertices=vertices)
+        for label, e in errs.items():
+            means[label][name] = float(e.mean())
+        print(f"{name:<8} " + "  ".join(f"{label if label != 'exact' else 'exact map'}: mean {e.mean():.5f}, "
+                                        f"within 0.05 {np.mean(e <= 0.05):.3f}" for label, e in errs.items()),
+              flush=True)
+    for label, per_pose in means.items():
+        what = "exact map" if label == "exact" else f"{label} carried"
+        print(f"{'poses':<8} {what} against the ground truth: mean {np.mean(list(per_pose.values())):.5f} "
+              f"({len(per_pose)} poses)")
+    return means
+
+
+def against_lines(carried: dict, runs: list[str]) -> list[str]:
+    """Lines comparing each method's mean error in ``bench/correspondence.py --json`` runs ``runs`` (their per-pose
+    ``mean_error``: on the remeshed set, its own maps there; on the original meshes, the maps that were carried)
+    with its carried mean error (``remeshed_errors``' result {method: {pose: mean}}), over the poses both have, as
+    ratios both ways."""
+    lines = []
+    for path in runs:
+        with open(path) as fh:
+            pairs = {row["mesh"]: row for row in json.load(fh)["pairs"]}
+        for method, per_pose in carried.items():
+            poses = [p for p in per_pose if p in pairs and method in pairs[p]]
+            if method == "exact" or not poses:
+                continue
+            own = float(np.mean([pairs[p][method]["mean_error"] for p in poses]))
+            ref = float(np.mean([per_pose[p] for p in poses]))
+            lines.append(f"{method}: {own:.5f} in {os.path.basename(path)} / carried {ref:.5f} = x{own / ref:.3f}, "
+                         f"carried / run x{ref / own:.3f} ({len(poses)} poses)")
+    return lines
 
 
 def snapped_landmarks(ids: np.ndarray, V: np.ndarray, V_new: np.ndarray, what: str) -> tuple[np.ndarray, np.ndarray]:
@@ -248,7 +328,24 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--poses", type=int, default=None, help="only the first N test meshes")
     ap.add_argument("--floor", action="store_true", help="also the error of the exact map (see above)")
+    ap.add_argument("--carry", default=None, metavar="MAPS",
+                    help="do not remesh: score the maps of the original meshes in MAPS/<method>/<pose>.txt "
+                         "(bench/correspondence.py --save-maps) carried to the existing set --out (see above)")
+    ap.add_argument("--against", default=None, nargs="+", metavar="JSON",
+                    help="with --carry: each method's mean error in these bench/correspondence.py --json runs (on "
+                         "the remeshed set, or the original one) against its carried mean error (shared poses)")
     args = ap.parse_args(argv)
+    if args.against and not args.carry:
+        ap.error("--against needs --carry")
+    if args.carry:
+        if not os.path.isfile(os.path.join(args.out, MARKER)):
+            raise SystemExit(f"{args.out}: no remeshed set written by {os.path.basename(__file__)}; run it without "
+                             "--carry first")
+        names = sorted(os.path.splitext(f)[0] for f in os.listdir(os.path.join(args.out, "ground_truth")))
+        means = remeshed_errors(args.out, args.data, names[:args.poses], args.carry)
+        for line in against_lines(means, args.against or []):
+            print(line)
+        return 0
     info = remesh_set(args.data, args.out, args.seed, args.poses)
     if args.floor:
         floor_errors(args.out, args.data, [k for k in info if k != "mesh000"])

@@ -183,3 +183,34 @@ def test_relative_lines_give_ratios_and_differences():
     assert lines[0].startswith("relative to base.json")
     assert lines[1:] == ["  dense_auto    mean err x1.100  s/pair x0.500  lm acc -0.0500  <=0.05 -0.010  "
                          "<=0.25 +0.000"]
+
+
+@pytest.mark.course
+def test_a_carried_map_of_same_triangles_is_the_map_itself():
+    """carried_map (the --carry reference) on the course meshes themselves: a vertex's closest surface point is
+    itself, so any map between them comes back unchanged (a permutation, not only the identity of exact_map);
+    a map with no image for a needed vertex is refused."""
+    from bench.remesh_scape import carried_map
+
+    Vs, Fs = _mesh(SCAPE / "meshes/template/mesh000.obj")
+    Vt, _ = _mesh(SCAPE / "meshes/test/mesh002.obj")
+    p2p = np.random.default_rng(0).permutation(len(Vs))
+    some = np.arange(0, len(Vs), 7)
+    np.testing.assert_array_equal(carried_map(Vs[some], Vs, Fs, p2p, Vt, Vt), p2p[some])
+    p2p[some[3]] = -1
+    with pytest.raises(ValueError, match="no pose vertex"):
+        carried_map(Vs[some], Vs, Fs, p2p, Vt, Vt)
+
+
+def test_against_lines_compare_a_run_with_the_carried_errors_on_shared_poses(tmp_path):
+    import json
+
+    from bench.remesh_scape import against_lines
+
+    run = {"pairs": [{"mesh": "mesh002", "dense_auto": {"mean_error": 0.012}},
+                     {"mesh": "mesh004", "dense_auto": {"mean_error": 0.010}}]}
+    (tmp_path / "rem.json").write_text(json.dumps(run))
+    carried = {"exact": {"mesh002": 0.002}, "dense_auto": {"mesh002": 0.010, "mesh005": 0.5},
+               "dense_sparse": {"mesh002": 0.01}}
+    assert against_lines(carried, [str(tmp_path / "rem.json")]) == [
+        "dense_auto: 0.01200 in rem.json / carried 0.01000 = x1.200, carried / run x0.833 (1 poses)"]
