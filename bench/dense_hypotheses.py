@@ -111,20 +111,26 @@ def extrinsic_by_rounds(S, T, p2p, step):
 
 def choice(rows: list[dict]) -> dict:
     """What the automatic mode does with these scored candidates: how many it refines, which of them it drops
-    after the first step (``refine.surviving_hypotheses``), which it keeps, its confidence, and whether that map
-    is right (landmark accuracy >= 0.5). Rows of a file without ``step_distortions`` count as never dropped (and
-    are compared by their last distortion)."""
+    after the first step and after later ones (``refine.surviving_after_step``, step by step as ``refine_best``),
+    which it keeps, its confidence, and whether that map is right (landmark accuracy >= 0.5). Rows of a file
+    without ``step_distortions`` count as never dropped (and are compared by their last distortion)."""
     from corr_core.correspondence.dense.init import hypotheses_to_refine
-    from corr_core.correspondence.dense.refine import best_refined, surviving_hypotheses
+    from corr_core.correspondence.dense.refine import best_refined, surviving_after_step
 
     n = hypotheses_to_refine([r["chirality"] for r in rows], [r["wks"] for r in rows])
     steps = [r.get("step_distortions", [None, r["distortion"]])[1:] for r in rows[:n]]   # after each step
-    alive = surviving_hypotheses([s[0] for s in steps]) if all(len(s) > 1 for s in steps) else list(range(n))
-    best = best_refined([np.zeros(0, dtype=np.int64)] * n, [s if i in alive else s[:1] for i, s in enumerate(steps)],
-                        alive=alive)
+    alive, got = list(range(n)), [len(s) for s in steps]
+    if all(len(s) > 1 for s in steps):
+        got = [1] * n
+        for k in range(1, len(steps[0])):                     # after step k, before the last
+            alive = surviving_after_step([s[:got[i]] for i, s in enumerate(steps)], alive)
+            for i in alive:
+                got[i] = k + 1
+    best = best_refined([np.zeros(0, dtype=np.int64)] * n, [s[:got[i]] for i, s in enumerate(steps)], alive=alive)
     kept = rows[best.index]
-    return {"refined": n, "dropped": sum(best.dropped), "kept": best.index, "confidence": best.confidence,
-            "margin": best.margin, "right": kept["landmark_accuracy"] >= 0.5, "mean_error": kept["mean_error"],
+    return {"refined": n, "dropped": sum(best.dropped), "dropped_later": sum(1 < g < len(steps[0]) for g in got),
+            "kept": best.index, "confidence": best.confidence, "margin": best.margin,
+            "right": kept["landmark_accuracy"] >= 0.5, "mean_error": kept["mean_error"],
             "twisted": kept["landmark_accuracy"] >= 0.5 and kept["mean_error"] > TWISTED_ERROR}
 
 
@@ -173,6 +179,36 @@ def first_step_line(results: list[dict]) -> None:
         print(f"after the first step: the right map the least distorted on {least} of {counted} targets; the "
               f"others' distortion above it by {min(excess):.1%} to {max(excess):.1%} (median "
               f"{np.median(excess):.1%})")
+
+
+def later_steps_line(results: list[dict]) -> None:
+    """Print how well the score so far (``refine.refinement_score`` of the distortions after the first k steps)
+    tells the right map (the least distorted right one at the end) from the others after each step k >= 2 but the
+    last: the largest ratio of the right map's score to the least one's, and how many of the other hypotheses are
+    beyond ``refine.LATER_DROP_MARGIN`` there (the ground of dropping after a later step)."""
+    from corr_core.correspondence.dense.refine import LATER_DROP_MARGIN, refinement_score
+
+    refined = [r["candidates"][:r["refined"]] for r in results]
+    refined = [c for c in refined if len(c) > 1 and all("step_distortions" in x for x in c)]
+    n_steps = min((len(x["step_distortions"]) - 1 for c in refined for x in c), default=0)
+    parts = []
+    for k in range(2, n_steps):
+        worst, beyond, others = 1.0, 0, 0
+        for cands in refined:
+            right = [i for i, x in enumerate(cands)
+                     if x["landmark_accuracy"] >= 0.5 and x["mean_error"] <= TWISTED_ERROR]
+            if not right:
+                continue
+            kept = min(right, key=lambda i: cands[i]["distortion"])
+            so_far = [refinement_score(x["step_distortions"][1:k + 1]) for x in cands]
+            least = min(so_far)
+            worst = max(worst, so_far[kept] / least)
+            beyond += sum(1 for i, d in enumerate(so_far) if i != kept and d > (1 + LATER_DROP_MARGIN) * least)
+            others += len(so_far) - 1
+        parts.append(f"after {k} steps: {worst:.3f}, {beyond}/{others}")
+    if parts:
+        print(f"score so far (the right map's / the least one's at most, the others beyond LATER_DROP_MARGIN "
+              f"{LATER_DROP_MARGIN}): " + "; ".join(parts))
 
 
 def rounds_line(results: list[dict]) -> None:
@@ -283,9 +319,12 @@ def main(argv=None) -> int:
     flipped = ", ".join(f"seed {r['seed']} {r['mesh']}" for r in wrong) or "none"
     print(f"\n{len(results)} targets, seeds {args.seeds}: {len(wrong)} flipped ({flipped}); mean error of the kept "
           f"maps {np.mean([r['mean_error'] for r in results]):.4f}")
+    dropped_later = sum(r['dropped_later'] for r in results)
     print(f"hypotheses refined: {sum(r['refined'] for r in results)}, of which dropped after the first step: "
-          f"{sum(r['dropped'] for r in results)} (of the {sum(r['refined'] - 1 for r in results)} not kept)")
+          f"{sum(r['dropped'] for r in results) - dropped_later}, after a later step: {dropped_later} (of the "
+          f"{sum(r['refined'] - 1 for r in results)} not kept)")
     first_step_line(results)
+    later_steps_line(results)
     rounds_line(results)
     choice_rules_line(results)
     if right:

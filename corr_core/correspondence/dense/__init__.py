@@ -28,14 +28,15 @@ from corr_core.correspondence.dense.init import automatic_hypotheses, map_automa
 from corr_core.correspondence.dense.refine import (DEFAULT_REFINE, BestMap, RefineStep, best_with_points,
                                                    map_distortion, points_agreement, refine_best, refine_extrinsic,
                                                    refine_geodesic, refine_map, refine_plan, refine_spectral,
-                                                   surviving_hypotheses, upsample_spectral, with_alternative)
+                                                   surviving_after_step, surviving_hypotheses, upsample_spectral,
+                                                   with_alternative)
 from corr_core.correspondence.dense.transfer import format_dense_map, read_dense_map, transfer_landmarks
 
 __all__ = ["MeshBasis", "mesh_basis", "map_to_original", "dense_map", "map_from_points", "map_automatic",
            "automatic_hypotheses", "upsample_spectral", "refine_extrinsic", "refine_geodesic", "refine_deform",
            "refine_settle",
            "refine_map", "refine_plan", "RefineStep", "refine_spectral", "refine_best", "BestMap",
-           "surviving_hypotheses", "best_with_points", "with_alternative", "map_distortion",
+           "surviving_hypotheses", "surviving_after_step", "best_with_points", "with_alternative", "map_distortion",
            "points_agreement", "DEFAULT_REFINE", "transfer_landmarks", "format_dense_map", "read_dense_map"]
 
 

@@ -513,34 +513,45 @@ LOW_CONFIDENCE = 0.5     # below this a map is reported for a look (half the mar
 # distorted one after the first step (seed 23's pose 6: dropped at the former margin, 10 %, a flip reported with
 # confidence 1) and came out the least distorted at the end; 0.3 leaves room above that.
 DROP_MARGIN = 0.30
+# After a later step (not the last), a hypothesis whose ``refinement_score`` so far is this much (relative) above the
+# least one's is dropped too. By then the steps judge more surely than the first alone. On the same 217 generated
+# targets (`python bench/dense_hypotheses.py --seeds 0-9 --candidates 3 --decimated` and `--seeds 13-33`,
+# 2026-12-03; docs/dense.md "Confidence"), the right map's score after the first two steps was at most 1.057 times
+# the least one's (1.000 on seeds 0-9); after the first step alone it was up to 1.178 times. The same choices were
+# made with 95 hypotheses fewer refined to the end, and none flipped. 0.15 leaves room above the 1.057 seen, and
+# spares the last step (``refine_deform``, the costliest after the first) most runner-ups the first step kept.
+LATER_DROP_MARGIN = 0.15
 
 
 @dataclass(frozen=True)
 class BestMap:
     """The result of ``refine_best``: p2p (n_s,) int local ids of the kept refined map, index: its position among
     the hypotheses, distortions: ``map_distortion`` of every hypothesis after the last step it was refined by
-    (same order), dropped: which hypotheses were dropped after the first step (empty: none), first_step: every
-    hypothesis's ``map_distortion`` after that step (empty when no hypothesis was dropped), scores: what the
+    (same order), dropped: which hypotheses were dropped before the last step (empty: none), step_distortions:
+    every hypothesis's ``map_distortion`` after each step it got (empty when none was dropped), scores: what the
     choice compared (``refinement_score``; empty: the distortions)."""
     p2p: np.ndarray
     index: int
     distortions: tuple[float, ...]
     dropped: tuple[bool, ...] = ()
-    first_step: tuple[float, ...] = ()
+    step_distortions: tuple[tuple[float, ...], ...] = ()
     scores: tuple[float, ...] = ()
 
     @property
     def margin(self) -> float:
         """(runner-up's score - kept one's) / kept one's: >= 0, each other hypothesis compared with the kept
-        one on the same footing (a dropped one: their distortions after the first step, where it was dropped);
-        inf with a single hypothesis (nothing to compare with) or a kept map of zero distortion."""
+        one on the same footing (a dropped one: their ``refinement_score`` over the steps it got, where it was
+        dropped); inf with a single hypothesis (nothing to compare with) or a kept map of zero distortion."""
         scores = self.scores or self.distortions
         margins = []
         for i, d in enumerate(scores):
             if i == self.index:
                 continue
-            kept = self.first_step[self.index] if self.dropped and self.dropped[i] else scores[self.index]
-            other = self.first_step[i] if self.dropped and self.dropped[i] else d
+            kept, other = scores[self.index], d
+            if self.dropped and self.dropped[i]:
+                got = len(self.step_distortions[i])
+                kept = refinement_score(self.step_distortions[self.index][:got])
+                other = refinement_score(self.step_distortions[i])
             margins.append((other - kept) / kept if kept > 0 else float("inf"))
         return float(min(margins)) if margins else float("inf")
 
@@ -559,6 +570,26 @@ def surviving_hypotheses(first_step: Sequence[float], *, drop_margin: float = DR
     (h,) floats) is within ``drop_margin`` (relative) of the least one's. Returns their indices, in order."""
     least = min(first_step)
     return [i for i, d in enumerate(first_step) if d <= (1.0 + drop_margin) * least]
+
+
+def surviving_after_step(step_distortions: Sequence[Sequence[float]], alive: Sequence[int], *,
+                         drop_margin: float = DROP_MARGIN, later_margin: float = LATER_DROP_MARGIN) -> list[int]:
+    """Which of the hypotheses ``alive`` go on to the next step. step_distortions: every hypothesis's
+    ``map_distortion`` after each step it got (the alive ones: the same number s >= 1 of steps). After the first
+    step: ``surviving_hypotheses`` of those distortions at ``drop_margin``; after a later one: of their
+    ``refinement_score`` so far at ``later_margin``. Returns the surviving indices (a subset of ``alive``), in
+    order."""
+    alive = list(alive)
+    if len(alive) < 2:
+        return alive
+    got = {len(step_distortions[i]) for i in alive}
+    if len(got) != 1:
+        raise ValueError(f"surviving_after_step: the alive hypotheses got different numbers of steps {sorted(got)}")
+    if got == {1}:
+        kept = surviving_hypotheses([step_distortions[i][0] for i in alive], drop_margin=drop_margin)
+    else:
+        kept = surviving_hypotheses([refinement_score(step_distortions[i]) for i in alive], drop_margin=later_margin)
+    return [alive[j] for j in kept]
 
 
 def refinement_score(step_distortions: Sequence[float]) -> float:
@@ -586,8 +617,8 @@ def best_refined(maps: Sequence[np.ndarray], step_distortions: Sequence[Sequence
     refined to the end (ties to the earlier one).
 
     Args: maps: h refined maps ((n_s,) int local ids); step_distortions: h sequences, each hypothesis's
-        ``map_distortion`` after every step it got (a dropped one: only the first); alive: the indices refined to
-        the end (``surviving_hypotheses``; None: all).
+        ``map_distortion`` after every step it got (a dropped one: those before it was dropped); alive: the
+        indices refined to the end (``surviving_after_step``; None: all).
     Returns: ``BestMap`` (dropped and first_step recorded when some hypothesis was dropped).
     """
     alive = range(len(maps)) if alive is None else alive
@@ -597,18 +628,22 @@ def best_refined(maps: Sequence[np.ndarray], step_distortions: Sequence[Sequence
     dropped = tuple(i not in alive for i in range(len(maps)))
     if not any(dropped):
         return BestMap(maps[best], best, distortions, scores=scores)
-    return BestMap(maps[best], best, distortions, dropped, tuple(float(s[0]) for s in step_distortions), scores)
+    steps = tuple(tuple(float(d) for d in s) for s in step_distortions)
+    return BestMap(maps[best], best, distortions, dropped, steps, scores)
 
 
 def refine_best(source: MeshBasis, target: MeshBasis, maps: list,
                 refine: str | Sequence | None = DEFAULT_REFINE, options: Mapping | None = None, *,
-                drop_margin: float = DROP_MARGIN) -> BestMap:
+                drop_margin: float = DROP_MARGIN, later_margin: float = LATER_DROP_MARGIN) -> BestMap:
     """Refine each of several hypothesis maps (``refine_map``) and keep the best: the lowest
     ``refinement_score`` (geometric mean of the distortion after each step).
 
     Every hypothesis gets the plan's first step; one then more distorted than the least distorted by more than
     ``drop_margin`` (relative: already surely beaten, ``surviving_hypotheses``) is dropped, the others get the
-    remaining steps. Args: maps: [(n_s,) int local ids], e.g. the upsampled maps of ``init.automatic_hypotheses``.
+    next step; after each later step but the last, one whose ``refinement_score`` so far is more than
+    ``later_margin`` above the least is dropped too (``surviving_after_step``).
+
+    Args: maps: [(n_s,) int local ids], e.g. the upsampled maps of ``init.automatic_hypotheses``.
     Returns: ``BestMap`` (the kept refined map, its index in ``maps``, every hypothesis's ``map_distortion``, which
     were dropped; its ``confidence`` says how clear the choice was). Ties go to the earlier hypothesis (the better
     ranked one).
@@ -621,11 +656,13 @@ def refine_best(source: MeshBasis, target: MeshBasis, maps: list,
         return best_refined(refined, [[map_distortion(source, target, m)] for m in refined])
     refined = [plan[0].run(source, target, m) for m in maps]
     steps = [[map_distortion(source, target, m)] for m in refined]
-    alive = surviving_hypotheses([s[0] for s in steps], drop_margin=drop_margin)
-    for i in alive:
-        for step in plan[1:]:
+    alive = surviving_after_step(steps, range(len(maps)), drop_margin=drop_margin, later_margin=later_margin)
+    for k, step in enumerate(plan[1:], start=2):
+        for i in alive:
             refined[i] = step.run(source, target, refined[i])
             steps[i].append(map_distortion(source, target, refined[i]))
+        if k < len(plan):
+            alive = surviving_after_step(steps, alive, drop_margin=drop_margin, later_margin=later_margin)
     return best_refined(refined, steps, alive=alive)
 
 

@@ -219,7 +219,7 @@ def test_refine_best_drops_a_hypothesis_surely_beaten_after_the_first_step(pair,
     assert d_turned > (1 + refine.DROP_MARGIN) * d_truth                       # the fixture's turn: surely beaten
     best = refine.refine_best(S, T, [turned, truth], ["first", "later"])
     assert best.index == 1 and len(later) == 1 and np.array_equal(later[0], truth)   # the turn got no later step
-    assert best.dropped == (True, False) and best.first_step == (d_turned, d_truth)
+    assert best.dropped == (True, False) and best.step_distortions == ((d_turned,), (d_truth, d_truth))
     assert best.margin == pytest.approx((d_turned - d_truth) / d_truth) and best.confidence == 1.0
     later.clear()
     close = refine.refine_best(S, T, [truth, truth.copy()], ["first", "later"])   # a tie: both refined to the end
@@ -236,8 +236,52 @@ def test_surviving_hypotheses_and_the_margin_of_a_dropped_one():
     assert surviving_hypotheses([0.2, 0.219, 0.221], drop_margin=0.1) == [0, 1]
     assert surviving_hypotheses([float("inf"), float("inf")]) == [0, 1]      # nothing to tell them apart
     p2p = np.zeros(3, dtype=np.int64)
-    dropped = BestMap(p2p, 0, (0.20, 0.26), dropped=(False, True), first_step=(0.25, 0.26))
+    dropped = BestMap(p2p, 0, (0.20, 0.26), dropped=(False, True), step_distortions=((0.25, 0.20), (0.26,)))
     assert dropped.margin == pytest.approx(0.04) and dropped.confidence == pytest.approx(0.4)   # same-step compare
+    later = BestMap(p2p, 0, (0.18, 0.25), dropped=(False, True), step_distortions=((0.2, 0.2, 0.18), (0.2, 0.25)))
+    assert later.margin == pytest.approx(np.sqrt(0.2 * 0.25) / 0.2 - 1)          # scores over the same two steps
+
+
+def test_surviving_after_step_drops_on_the_first_distortion_then_on_the_score_so_far():
+    from corr_core.correspondence.dense import surviving_after_step
+    from corr_core.correspondence.dense.refine import DROP_MARGIN, LATER_DROP_MARGIN
+
+    assert LATER_DROP_MARGIN < DROP_MARGIN
+    first = [[0.20], [0.25], [0.27]]                                  # after step 1: 1.25 kept, 1.35 dropped
+    assert surviving_after_step(first, [0, 1, 2]) == [0, 1]
+    second = [[0.20, 0.20], [0.25, 0.20], [0.27]]               # scores so far 0.2 and 0.2236 (x1.118): kept
+    assert surviving_after_step(second, [0, 1]) == [0, 1]
+    second[1][1] = 0.25                                          # 0.25 (x1.25): dropped after a later step
+    assert surviving_after_step(second, [0, 1]) == [0]
+    assert surviving_after_step(second, [1]) == [1]              # a lone hypothesis always goes on
+    with pytest.raises(ValueError, match="different numbers of steps"):
+        surviving_after_step(second, [0, 2])
+
+
+def test_refine_best_drops_a_hypothesis_beaten_after_a_later_step_before_the_last(pair, monkeypatch):
+    """A hypothesis close after the first step but clearly beaten after the second gets no last step; the margin
+    compares the two on the steps both got."""
+    from corr_core.correspondence.dense import refine
+
+    S, T = pair
+    truth, turned = np.arange(S.n), _turned_map(S, T)
+    near = truth.copy()
+    near[:3] = near[3]                                           # nearly the truth after the first step
+    last = []
+    monkeypatch.setitem(refine.REFINE_STEPS, "first", lambda source, target, p2p: p2p)
+    monkeypatch.setitem(refine.REFINE_STEPS, "mid",
+                        lambda source, target, p2p: p2p if np.array_equal(p2p, truth) else turned)
+    monkeypatch.setitem(refine.REFINE_STEPS, "last", lambda source, target, p2p: last.append(p2p) or p2p)
+    d_truth, d_near, d_turned = (refine.map_distortion(S, T, m) for m in (truth, near, turned))
+    assert d_near <= (1 + refine.DROP_MARGIN) * d_truth                        # survives the first step
+    assert np.sqrt(d_near * d_turned) > (1 + refine.LATER_DROP_MARGIN) * d_truth
+    best = refine.refine_best(S, T, [near, truth], ["first", "mid", "last"])
+    assert best.index == 1 and len(last) == 1 and np.array_equal(last[0], truth)
+    assert best.dropped == (True, False) and best.step_distortions == ((d_near, d_turned), (d_truth,) * 3)
+    assert best.margin == pytest.approx(np.sqrt(d_near * d_turned) / d_truth - 1)
+    last.clear()
+    both = refine.refine_best(S, T, [near, truth], ["first", "mid", "last"], later_margin=10.0)
+    assert len(last) == 2 and both.dropped == () and both.index == 1
 
 
 def test_points_agreement_counts_the_given_points_a_map_keeps(pair):
