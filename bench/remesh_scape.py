@@ -140,8 +140,16 @@ def carried_map(V_template_new: np.ndarray, V_template: np.ndarray, F_template: 
 
     It scores what a map exactly as accurate as ``p2p`` is on the original meshes scores on these meshes,
     whose coarser vertices and snapped ground truth add their own error (the identity map gives ``exact_map``)."""
-    p2p = np.asarray(p2p, np.int64)
     corners, bary = closest_surface_points(V_template_new, V_template, F_template)
+    return carry(corners, bary, p2p, V_pose, V_pose_new)
+
+
+def carry(corners: np.ndarray, bary: np.ndarray, p2p: np.ndarray, V_pose: np.ndarray, V_pose_new: np.ndarray
+          ) -> np.ndarray:
+    """``carried_map`` from the template's closest surface points (``closest_surface_points``: corners (n_s,3)
+    int original vertex ids, barycentric coordinates (n_s,3) float), which do not depend on the pose: (n_s,)
+    int64 remeshed pose vertex ids."""
+    p2p = np.asarray(p2p, np.int64)
     images = p2p[corners]
     if (images < 0).any() or (images >= len(V_pose)).any():
         raise ValueError(f"carried_map: the map sends vertices the remeshed template needs to no pose vertex "
@@ -172,13 +180,15 @@ def remeshed_errors(out: str, data: str, names: list[str], maps_dir: str | None 
     Vs2, Fs2 = load_mesh(os.path.join(out, "meshes", "template", "mesh000.obj"))
     S = dense_basis.mesh_basis(Vs2, Fs2, k=100)
     vertices = S.vids[S.samples[:2000]]
-    methods = sorted(os.listdir(maps_dir)) if maps_dir else []
+    corners, bary = closest_surface_points(Vs2, Vs, Fs)          # the same for every pose and every map
+    identity = np.arange(len(Vs))
+    methods = sorted(m for m in os.listdir(maps_dir) if os.path.isdir(os.path.join(maps_dir, m))) if maps_dir else []
     means: dict = {"exact": {}, **{m: {} for m in methods}}
     for name in names:
         Vt, _ = load_mesh(os.path.join(data, "meshes", "test", f"{name}.obj"))
         Vt2, Ft2 = load_mesh(os.path.join(out, "meshes", "test", f"{name}.obj"))
         truth = np.loadtxt(os.path.join(out, "ground_truth", f"{name}.txt"), dtype=np.int64)
-        maps = {"exact": exact_map(Vs2, Vs, Fs, Vt, Vt2)}
+        maps = {"exact": carry(corners, bary, identity, Vt, Vt2)}            # exact_map
         for m in methods:
             path = os.path.join(maps_dir, m, f"{name}.txt")
             if os.path.isfile(path):
@@ -186,7 +196,7 @@ def remeshed_errors(out: str, data: str, names: list[str], maps_dir: str | None 
                 if p2p.shape != (len(Vs),):
                     raise SystemExit(f"{path}: {p2p.shape[0]} ids, the original template has {len(Vs)} vertices: "
                                      f"not a map of {data}")
-                maps[m] = carried_map(Vs2, Vs, Fs, p2p, Vt, Vt2)
+                maps[m] = carry(corners, bary, p2p, Vt, Vt2)                  # carried_map
         errs = measures.dense_errors(Vt2, Ft2, maps, truth, vertices=vertices)
         for label, e in errs.items():
             means[label][name] = float(e.mean())
@@ -194,6 +204,9 @@ def remeshed_errors(out: str, data: str, names: list[str], maps_dir: str | None 
                                         f"within 0.05 {np.mean(e <= 0.05):.3f}" for label, e in errs.items()),
               flush=True)
     for label, per_pose in means.items():
+        if not per_pose:
+            print(f"{'poses':<8} {label}: no map file for these poses in {maps_dir}/{label}/")
+            continue
         what = "exact map" if label == "exact" else f"{label} carried"
         print(f"{'poses':<8} {what} against the ground truth: mean {np.mean(list(per_pose.values())):.5f} "
               f"({len(per_pose)} poses)")
@@ -338,6 +351,8 @@ def main(argv=None) -> int:
     if args.against and not args.carry:
         ap.error("--against needs --carry")
     if args.carry:
+        if not os.path.isdir(args.carry):
+            raise SystemExit(f"{args.carry}: no such folder of maps (bench/correspondence.py --save-maps writes one)")
         if not os.path.isfile(os.path.join(args.out, MARKER)):
             raise SystemExit(f"{args.out}: no remeshed set written by {os.path.basename(__file__)}; run it without "
                              "--carry first")

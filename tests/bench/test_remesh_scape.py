@@ -214,3 +214,13 @@ def test_against_lines_compare_a_run_with_the_carried_errors_on_shared_poses(tmp
                "dense_sparse": {"mesh002": 0.01}}
     assert against_lines(carried, [str(tmp_path / "rem.json")]) == [
         "dense_auto: 0.01200 in rem.json / carried 0.01000 = x1.200, carried / run x0.833 (1 poses)"]
+
+
+def test_carry_refuses_a_missing_maps_folder_or_a_set_it_did_not_write(tmp_path):
+    from bench.remesh_scape import main
+
+    with pytest.raises(SystemExit, match="no such folder of maps"):
+        main(["--carry", str(tmp_path / "nowhere"), "--out", str(tmp_path)])
+    (tmp_path / "maps").mkdir()
+    with pytest.raises(SystemExit, match="no remeshed set written by"):
+        main(["--carry", str(tmp_path / "maps"), "--out", str(tmp_path)])

@@ -619,7 +619,7 @@ def best_refined(maps: Sequence[np.ndarray], step_distortions: Sequence[Sequence
     Args: maps: h refined maps ((n_s,) int local ids); step_distortions: h sequences, each hypothesis's
         ``map_distortion`` after every step it got (a dropped one: those before it was dropped); alive: the
         indices refined to the end (``surviving_after_step``; None: all).
-    Returns: ``BestMap`` (dropped and first_step recorded when some hypothesis was dropped).
+    Returns: ``BestMap`` (dropped and step_distortions recorded when some hypothesis was dropped).
     """
     alive = range(len(maps)) if alive is None else alive
     distortions = tuple(float(s[-1]) for s in step_distortions)
