@@ -124,7 +124,8 @@ def _zoomout_and_match(source: MeshBasis, target: MeshBasis, C: np.ndarray, *, k
                         all_target_vertices=all_target_vertices)
     ks, kt = C.shape
     cands = np.arange(target.n) if all_target_vertices else target.samples
-    match = fmaps.p2p_from_fmap(C, source.evecs[source.samples, :ks], target.evecs[cands, :kt])
+    match = fmaps.p2p_from_fmap(C, source.evecs[source.samples, :ks], target.evecs[cands, :kt],
+                                cells=target.vertex_cells() if all_target_vertices else None)
     return C, cands[match]
 
 

@@ -52,7 +52,8 @@ def zoomout(source: MeshBasis, target: MeshBasis, C: np.ndarray, *, k_end: int =
         k, k_next = sizes[i], sizes[i + 1]
         full = all_target_vertices and (k >= (1.0 - full_band) * k_end or i == n_iter - 1)
         cands = np.arange(target.n) if full else target.samples[:n_target]
-        match = p2p_from_fmap(C, source.evecs[rows, :k], target.evecs[cands, :k], adjoint=adjoint)
+        match = p2p_from_fmap(C, source.evecs[rows, :k], target.evecs[cands, :k], adjoint=adjoint,
+                              cells=target.vertex_cells() if full else None)
         C = fmap_from_p2p(cands[match], source.evecs[rows, :k_next], target.evecs[:, :k_next])
     return C
 
@@ -60,4 +61,5 @@ def zoomout(source: MeshBasis, target: MeshBasis, C: np.ndarray, *, k_end: int =
 def p2p_full(source: MeshBasis, target: MeshBasis, C: np.ndarray, adjoint: bool = True) -> np.ndarray:
     """Every template vertex's nearest target vertex in the spectral embedding of C: (n_s,) int."""
     ks, kt = C.shape
-    return p2p_from_fmap(C, source.evecs[:, :ks], target.evecs[:, :kt], adjoint=adjoint)
+    return p2p_from_fmap(C, source.evecs[:, :ks], target.evecs[:, :kt], adjoint=adjoint,
+                         cells=target.vertex_cells())

@@ -1,5 +1,5 @@
 """The faster numerical paths of the dense basis and functional maps give the answers of the plain ones:
-basis eigenpairs (mid-band shift with its fallback), farthest-point samples (buffered Euclidean path), float32 nearest rows, the normal
+basis eigenpairs (mid-band shift with its fallback), farthest-point samples (buffered Euclidean path), float32 nearest rows (brute force and by cells), the normal
 equations of fmap_from_p2p, the row-decoupled functional-map fit, ZoomOut's sample-then-vertex schedule, and the
 benchmark's CPU-time ratios."""
 from __future__ import annotations
@@ -77,6 +77,43 @@ def test_nearest_rows_is_the_exact_nearest_neighbour_with_lowest_index_ties():
         fmaps.nearest_rows(queries, points[:, :3])
 
 
+def _random_cells(n_points: int, n_centres: int, seed: int) -> fmaps.RowCells:
+    """A partition with no geometric sense: the pruned search must stay exact, only slower."""
+    rng = np.random.default_rng(seed)
+    centres = rng.choice(n_points, n_centres, replace=False)
+    owner = rng.integers(0, n_centres, n_points)
+    owner[centres] = np.arange(n_centres)
+    return fmaps.RowCells(centres, owner, rng.permutation(n_centres))
+
+
+def test_nearest_rows_by_cells_is_the_brute_force_answer(ellipsoid):
+    rng = np.random.default_rng(5)
+    points = rng.normal(size=(900, 30))
+    queries = np.vstack([points[rng.integers(0, 900, 200)] + 1e-3 * rng.normal(size=(200, 30)),
+                         points[:50],                                   # distance 0: float32 cancellation
+                         rng.normal(size=(100, 30))])
+    brute = fmaps.nearest_rows(queries, points)
+    for seed in range(3):
+        assert np.array_equal(fmaps.nearest_rows(queries, points, cells=_random_cells(900, 40, seed)), brute)
+    doubled = np.vstack([points[:5], points[:5]])                        # ties go to the lowest row
+    assert np.array_equal(fmaps.nearest_rows(points[:5], doubled, cells=_random_cells(10, 2, 0)), np.arange(5))
+    far = 100.0 + 0.01 * points                      # float32 rounding of |x|^2 - 2 x.y as large as the gaps:
+    near = far[:300] + 0.003 * rng.normal(size=(300, 30))       # the bounds' slack keeps the brute force's answer
+    for seed in range(3):
+        assert np.array_equal(fmaps.nearest_rows(near, far, cells=_random_cells(900, 40, seed)),
+                              fmaps.nearest_rows(near, far))
+    # a mesh's spectral embedding with the basis's own cells, the way ZoomOut searches every vertex
+    V, F = ellipsoid
+    B = mesh_basis(V, F, k=30, n_samples=200)
+    cells = B.vertex_cells(n_centres=60, n_regions=8)
+    Q, _ = np.linalg.qr(rng.normal(size=(30, 30)))
+    target_rows = B.evecs @ (np.eye(30) + 0.3 * Q).T
+    assert np.array_equal(fmaps.nearest_rows(B.evecs[B.samples], target_rows, cells=cells),
+                          fmaps.nearest_rows(B.evecs[B.samples], target_rows))
+    with pytest.raises(ValueError, match="cells partition"):
+        fmaps.nearest_rows(queries, points[:100], cells=_random_cells(900, 40, 0))
+
+
 @pytest.mark.parametrize("rows", [300, 12])               # well-posed (normal equations) and rank-deficient (SVD)
 def test_fmap_from_p2p_is_the_least_squares_solution(rows):
     rng = np.random.default_rng(rows)
@@ -105,9 +142,10 @@ def test_zoomout_matches_samples_first_and_every_vertex_in_the_last_iterations(e
     seen = []
     real = zoomout.p2p_from_fmap
 
-    def spy(C, rows, cands, adjoint=True):
+    def spy(C, rows, cands, adjoint=True, cells=None):
         seen.append(len(cands))
-        return real(C, rows, cands, adjoint=adjoint)
+        assert (cells is not None) == (len(cands) == B.n)      # the all-vertex searches go by cells
+        return real(C, rows, cands, adjoint=adjoint, cells=cells)
 
     monkeypatch.setattr(zoomout, "p2p_from_fmap", spy)
     C = zoomout.zoomout(B, B, np.eye(10), k_end=30, step=5, all_target_vertices=True)   # k = 10, 15, 20, 25

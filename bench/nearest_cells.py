@@ -1,0 +1,143 @@
+"""The all-vertex spectral searches of the dense maps, brute force against the search by cells
+(``fmaps.nearest_rows(cells=...)``), on the searches an automatic map really makes.
+
+    python bench/nearest_cells.py [--seeds 0-1] [--poses 3] [--data SCAPE_FOLDER --pairs 2]
+                                  [--centres 2000,1000,700] [--regions 32,64,128]
+
+Every automatic map (``dense_map``, nothing given on the target) of the generated bodies of each seed (other
+people, poses 1..--poses, never the course poses) -- and, with ``--data``, of the first ``--pairs`` course-layout
+targets -- is made once while its searches over every target vertex (ZoomOut's last iterations, the final match)
+are recorded. Each recorded search is then timed (CPU seconds, one BLAS thread) by the brute force and by cells
+for the default cells and every centres x regions setting (``MeshBasis.vertex_cells``), and the answers compared. Prints per setting the
+mean milliseconds per search, the ratio to the brute force measured in the same run, and how many answers differ
+(must be 0).
+"""
+from __future__ import annotations
+
+import argparse
+import glob
+import os
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from bench._env import one_blas_thread  # noqa: E402
+
+one_blas_thread()
+
+import numpy as np  # noqa: E402
+
+
+def recorded_searches(V_s, F_s, S, targets, k_init: int) -> list:
+    """[(target basis, queries (q,k) float32, points (n_t,k) float32)] of the all-vertex searches the automatic
+    maps to ``targets`` (name, V, F) make (``fmaps.nearest_rows`` called with cells)."""
+    from corr_core.correspondence.dense import basis, dense_map, fmaps
+
+    searches, current = [], {}
+    real = fmaps.nearest_rows
+
+    def spy(queries, points, *, chunk=256, cells=None):
+        if cells is not None:
+            searches.append((current["T"], np.array(queries, dtype=np.float32), np.array(points, dtype=np.float32)))
+        return real(queries, points, chunk=chunk, cells=cells)
+
+    fmaps.nearest_rows = spy
+    try:
+        for name, V, F in targets:
+            current["T"] = basis.mesh_basis(V, F, k=S.evecs.shape[1], n_samples=len(S.samples), name=name)
+            dense_map(V_s, F_s, V, F, k=S.evecs.shape[1], k_init=k_init, basis_template=S,
+                      basis_target=current["T"])
+    finally:
+        fmaps.nearest_rows = real
+    return searches
+
+
+def time_searches(searches, centres: int | None, regions: int | None) -> tuple[float, int]:
+    """(mean CPU ms per search, answers differing from the brute force) with these cells (False: brute force;
+    None: ``vertex_cells``' defaults)."""
+    from corr_core.correspondence.dense import fmaps
+
+    seconds, differ = 0.0, 0
+    for T, queries, points in searches:
+        cells = None if centres is False else T.vertex_cells(centres, regions)
+        t0 = time.process_time()
+        found = fmaps.nearest_rows(queries, points, cells=cells)
+        seconds += time.process_time() - t0
+        if cells is not None:
+            differ += int((found != fmaps.nearest_rows(queries, points)).sum())
+    return 1000.0 * seconds / max(len(searches), 1), differ
+
+
+def generated(seeds: list[int], poses: int, work: str):
+    """(label, template V, F, basis, [(name, V, F)], k_init) per seed: generated other bodies, poses 1..poses, at
+    the settings of the generated-data benchmarks (``bench.dense_hypotheses.SETTINGS``)."""
+    from bench.dense_hypotheses import SETTINGS, generated_targets, generated_template
+    from corr_core.geometry.mesh_io import load_mesh
+
+    for seed in seeds:
+        root, _, S = generated_template(work, seed, poses, decimated=False)
+        V_s, F_s = load_mesh(os.path.join(root, "meshes", "template", "mesh000.obj"))
+        yield (f"seed {seed}", V_s, F_s, S, [(n, V, F) for n, V, F, _ in generated_targets(root, False)],
+               SETTINGS["k_init"])
+
+
+def course(data: str, pairs: int):
+    """The course-layout folder's template and first ``pairs`` targets, as ``generated`` (``dense_map``'s
+    defaults)."""
+    from corr_core.correspondence.dense import basis
+    from corr_core.geometry.mesh_io import load_mesh
+
+    V_s, F_s = load_mesh(os.path.join(data, "meshes", "template", "mesh000.obj"))
+    S = basis.mesh_basis(V_s, F_s, k=100, name="template")
+    S.sample_distances(300)
+    tests = sorted(glob.glob(os.path.join(data, "meshes", "test", "*.obj")))[:pairs]
+    yield os.path.basename(os.path.normpath(data)), V_s, F_s, S, [
+        (os.path.splitext(os.path.basename(p))[0], *load_mesh(p)) for p in tests], 40
+
+
+def ints(text: str) -> list[int]:
+    """"0-2,5" -> [0, 1, 2, 5]."""
+    out = []
+    for part in text.split(","):
+        a, _, b = part.partition("-")
+        out += list(range(int(a), int(b or a) + 1))
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seeds", default="0-1", help="generated seeds (other bodies), e.g. 0-1; '' for none")
+    ap.add_argument("--poses", type=int, default=3)
+    ap.add_argument("--data", default=None, help="also a course-layout folder (meshes/template, meshes/test)")
+    ap.add_argument("--pairs", type=int, default=2)
+    ap.add_argument("--centres", default="2000,1000,700")
+    ap.add_argument("--regions", default="32,64,128")
+    ap.add_argument("--work", default=None, help="folder for the generated data (default: a temporary one)")
+    args = ap.parse_args(argv)
+
+    sets = []
+    with tempfile.TemporaryDirectory() as tmp:
+        if args.seeds:
+            sets += list(generated(ints(args.seeds), args.poses, args.work or tmp))
+        if args.data:
+            sets += list(course(args.data, args.pairs))
+        grid = [(c, r) for c in ints(args.centres) for r in ints(args.regions)]
+        for label, V_s, F_s, S, targets, k_init in sets:
+            searches = recorded_searches(V_s, F_s, S, targets, k_init)
+            n_t = int(np.mean([len(p) for _, _, p in searches]))
+            brute, _ = time_searches(searches, False, False)
+            print(f"{label}: {len(searches)} all-vertex searches of {len(targets)} automatic maps, "
+                  f"{searches[0][1].shape[0]} queries among {n_t} target vertices (mean); brute force "
+                  f"{brute:.1f} ms per search", flush=True)
+            for centres, regions in [(None, None)] + grid:
+                ms, differ = time_searches(searches, centres, regions)
+                setting = "default (MeshBasis.vertex_cells)" if centres is None else \
+                    f"{centres:5d} centres {regions:4d} regions"
+                print(f"  cells {setting}: {ms:6.1f} ms  x{ms / brute:.3f} of the "
+                      f"brute force  answers differing: {differ}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
