@@ -11,8 +11,27 @@ def nearest_compatible(tree: cKDTree, normals_t: np.ndarray, P: np.ndarray, norm
     > ``min_cos`` with the point's normal (q,3): (ids (q,) int, distances (q,) float, inf when none qualifies).
 
     ``tree`` is a k-d tree of the target vertices (n_t,3). The normal test rejects a touching body part (it faces
-    the other way) and the other side of a thin part."""
-    d, c = tree.query(P, k=min(k, len(normals_t)))
+    the other way) and the other side of a thin part.
+
+    Most points' nearest vertex already agrees, so the two nearest are found first: a point whose nearest agrees
+    and is strictly nearer than the second has its answer; only the others search among ``k``. The answers are
+    those of the search among ``k`` for every point (half the time when nearly all agree)."""
+    k = min(k, len(normals_t))
+    if k < 2:
+        return _nearest_compatible_among(tree, normals_t, P, normals_p, min_cos, k)
+    d, c = tree.query(P, k=2)
+    ids, dist = c[:, 0], d[:, 0]
+    settled = (np.einsum("ij,ij->i", normals_p, normals_t[ids]) > min_cos) & (d[:, 1] > d[:, 0])
+    rest = np.flatnonzero(~settled)
+    if len(rest):
+        ids[rest], dist[rest] = _nearest_compatible_among(tree, normals_t, P[rest], normals_p[rest], min_cos, k)
+    return ids, dist
+
+
+def _nearest_compatible_among(tree: cKDTree, normals_t: np.ndarray, P: np.ndarray, normals_p: np.ndarray,
+                              min_cos: float, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """``nearest_compatible`` by one search among the ``k`` nearest of every point (ties: the k-d tree's order)."""
+    d, c = tree.query(P, k=k)
     d, c = d.reshape(len(P), -1), c.reshape(len(P), -1)
     d = np.where(np.einsum("ij,ikj->ik", normals_p, normals_t[c]) > min_cos, d, np.inf)
     best = np.argmin(d, axis=1)

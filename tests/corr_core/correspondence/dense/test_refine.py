@@ -59,6 +59,26 @@ def test_nearest_compatible_skips_a_part_facing_the_other_way():
     assert ids[0] >= len(g)
 
 
+def test_nearest_compatible_answers_as_the_search_among_k_for_every_point():
+    """The two-nearest shortcut changes no answer: agreeing and disagreeing normals, duplicated vertices (equal
+    distances: the search among k decides), none compatible among k (inf), k = 1."""
+    from corr_core.correspondence.dense.nearest import _nearest_compatible_among
+
+    rng = np.random.default_rng(2)
+    V = rng.normal(size=(400, 3))
+    V = np.vstack([V, V[:40]])                                   # 40 duplicated vertices
+    N = rng.normal(size=(len(V), 3))
+    N /= np.linalg.norm(N, axis=1, keepdims=True)
+    P = np.vstack([V[:60], V[rng.integers(0, len(V), 300)] + 0.05 * rng.normal(size=(300, 3))])
+    NP = N[np.r_[0:60, rng.integers(0, len(V), 300)]] + 0.8 * rng.normal(size=(360, 3))
+    tree = cKDTree(V)
+    for min_cos, k in ((0.0, 8), (0.9, 3), (0.0, 1)):
+        ids, d = nearest_compatible(tree, N, P, NP, min_cos=min_cos, k=k)
+        want_ids, want_d = _nearest_compatible_among(tree, N, P, NP, min_cos, k)
+        assert np.array_equal(ids, want_ids) and np.array_equal(d, want_d)
+    assert np.isinf(nearest_compatible(tree, N, P, NP, min_cos=0.9, k=3)[1]).any()
+
+
 def test_vertex_neighbourhoods_are_the_k_d_tree_rows_each_found_once():
     """The kept rows equal a fresh query of the same vertices, bit for bit, in a second call that asks for old
     and new vertices (repeats included); only vertices never asked for are queried; k is clipped to the count."""
