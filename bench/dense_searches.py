@@ -1,16 +1,20 @@
-"""The all-vertex spectral searches of the dense maps, brute force against the search by cells
-(``fmaps.nearest_rows(cells=...)``), on the searches an automatic map really makes.
+"""The dense maps' two kinds of nearest-neighbour search, each against its plain version, on the searches an
+automatic map really makes:
 
-    python bench/nearest_cells.py [--seeds 0-1] [--poses 3] [--data SCAPE_FOLDER --pairs 2]
-                                  [--centres 2000,1000,700] [--regions 32,64,128]
+- spectral: the searches over every target vertex (ZoomOut's last iterations, its final match), brute force
+  against the search by cells (``fmaps.nearest_rows(cells=...)``, for the default cells of
+  ``MeshBasis.vertex_cells`` and every --centres x --regions setting);
+- vertices: the 3-D nearest-vertex queries of the refinement (patch ICP, normal-compatible nearest vertices,
+  neighbourhoods, the registration's read-back), scipy's ``cKDTree`` against ``nearest.PointTree`` (pykdtree).
+
+    python bench/dense_searches.py [--seeds 0-1] [--poses 3] [--data SCAPE_FOLDER --pairs 2]
+                                   [--centres 1000] [--regions 64]       (e.g. --centres 2000,1000,700,500)
 
 Every automatic map (``dense_map``, nothing given on the target) of the generated bodies of each seed (other
 people, poses 1..--poses, never the course poses) -- and, with ``--data``, of the first ``--pairs`` course-layout
-targets -- is made once while its searches over every target vertex (ZoomOut's last iterations, the final match)
-are recorded. Each recorded search is then timed (CPU seconds, one BLAS thread) by the brute force and by cells
-for the default cells and every centres x regions setting (``MeshBasis.vertex_cells``), and the answers compared. Prints per setting the
-mean milliseconds per search, the ratio to the brute force measured in the same run, and how many answers differ
-(must be 0).
+targets -- is made once while its searches are recorded. Each recorded search is then timed (CPU seconds, one
+thread) both ways and the answers compared. Prints the mean milliseconds per search, the ratio to the plain
+version measured in the same run, and how many answers differ (must be 0).
 """
 from __future__ import annotations
 
@@ -29,28 +33,33 @@ one_blas_thread()
 import numpy as np  # noqa: E402
 
 
-def recorded_searches(V_s, F_s, S, targets, k_init: int) -> list:
-    """[(target basis, queries (q,k) float32, points (n_t,k) float32)] of the all-vertex searches the automatic
-    maps to ``targets`` (name, V, F) make (``fmaps.nearest_rows`` called with cells)."""
-    from corr_core.correspondence.dense import basis, dense_map, fmaps
+def recorded_searches(V_s, F_s, S, targets, k_init: int) -> tuple[list, list]:
+    """The searches of the automatic maps to ``targets`` (name, V, F): spectral [(target basis, queries (q,k)
+    float32, points (n_t,k) float32)] (``fmaps.nearest_rows`` called with cells) and vertices [(points (n,3),
+    queries (q,3), k)] (``nearest.PointTree.query``)."""
+    from corr_core.correspondence.dense import basis, dense_map, fmaps, nearest
 
-    searches, current = [], {}
-    real = fmaps.nearest_rows
+    spectral, vertices, current = [], [], {}
+    real_rows, real_query = fmaps.nearest_rows, nearest.PointTree.query
 
-    def spy(queries, points, *, chunk=256, cells=None):
+    def spy_rows(queries, points, *, chunk=256, cells=None):
         if cells is not None:
-            searches.append((current["T"], np.array(queries, dtype=np.float32), np.array(points, dtype=np.float32)))
-        return real(queries, points, chunk=chunk, cells=cells)
+            spectral.append((current["T"], np.array(queries, dtype=np.float32), np.array(points, dtype=np.float32)))
+        return real_rows(queries, points, chunk=chunk, cells=cells)
 
-    fmaps.nearest_rows = spy
+    def spy_query(tree, P, k=1):
+        vertices.append((tree.points, np.array(P, dtype=np.float64), k))
+        return real_query(tree, P, k)
+
+    fmaps.nearest_rows, nearest.PointTree.query = spy_rows, spy_query
     try:
         for name, V, F in targets:
             current["T"] = basis.mesh_basis(V, F, k=S.evecs.shape[1], n_samples=len(S.samples), name=name)
             dense_map(V_s, F_s, V, F, k=S.evecs.shape[1], k_init=k_init, basis_template=S,
                       basis_target=current["T"])
     finally:
-        fmaps.nearest_rows = real
-    return searches
+        fmaps.nearest_rows, nearest.PointTree.query = real_rows, real_query
+    return spectral, vertices
 
 
 def time_searches(searches, centres: int | None, regions: int | None) -> tuple[float, int]:
@@ -67,6 +76,29 @@ def time_searches(searches, centres: int | None, regions: int | None) -> tuple[f
         if cells is not None:
             differ += int((found != fmaps.nearest_rows(queries, points)).sum())
     return 1000.0 * seconds / max(len(searches), 1), differ
+
+
+def time_vertex_queries(queries: list) -> tuple[float, float, int]:
+    """(mean CPU ms per query batch with cKDTree, with ``PointTree``, answers differing) over the recorded 3-D
+    queries [(points, P, k)]; each tree is built once per point set, outside the timing."""
+    from scipy.spatial import cKDTree
+
+    from corr_core.correspondence.dense.nearest import PointTree
+
+    trees = {}
+    seconds, differ = np.zeros(2), 0
+    for points, P, k in queries:
+        if id(points) not in trees:
+            trees[id(points)] = (cKDTree(points), PointTree(points))
+        answers = []
+        for i, tree in enumerate(trees[id(points)]):
+            t0 = time.process_time()
+            answers.append(tree.query(P, k=k))
+            seconds[i] += time.process_time() - t0
+        (d0, i0), (d1, i1) = answers
+        differ += int((np.asarray(i0) != np.asarray(i1)).sum() + (d0 != d1).sum())
+    ms = 1000.0 * seconds / max(len(queries), 1)
+    return float(ms[0]), float(ms[1]), differ
 
 
 def generated(seeds: list[int], poses: int, work: str):
@@ -111,8 +143,8 @@ def main(argv=None) -> int:
     ap.add_argument("--poses", type=int, default=3)
     ap.add_argument("--data", default=None, help="also a course-layout folder (meshes/template, meshes/test)")
     ap.add_argument("--pairs", type=int, default=2)
-    ap.add_argument("--centres", default="2000,1000,700")
-    ap.add_argument("--regions", default="32,64,128")
+    ap.add_argument("--centres", default="1000", help="spectral cells' centres to time besides the default")
+    ap.add_argument("--regions", default="64")
     ap.add_argument("--work", default=None, help="folder for the generated data (default: a temporary one)")
     args = ap.parse_args(argv)
 
@@ -124,7 +156,7 @@ def main(argv=None) -> int:
             sets += list(course(args.data, args.pairs))
         grid = [(c, r) for c in ints(args.centres) for r in ints(args.regions)]
         for label, V_s, F_s, S, targets, k_init in sets:
-            searches = recorded_searches(V_s, F_s, S, targets, k_init)
+            searches, vertex_queries = recorded_searches(V_s, F_s, S, targets, k_init)
             n_t = int(np.mean([len(p) for _, _, p in searches]))
             brute, _ = time_searches(searches, False, False)
             print(f"{label}: {len(searches)} all-vertex searches of {len(targets)} automatic maps, "
@@ -136,6 +168,11 @@ def main(argv=None) -> int:
                     f"{centres:5d} centres {regions:4d} regions"
                 print(f"  cells {setting}: {ms:6.1f} ms  x{ms / brute:.3f} of the "
                       f"brute force  answers differing: {differ}", flush=True)
+            plain, fast, differ = time_vertex_queries(vertex_queries)
+            n_q = int(np.mean([len(P) for _, P, _ in vertex_queries]))
+            print(f"  vertices: {len(vertex_queries)} nearest-vertex query batches ({n_q} points each, mean): "
+                  f"cKDTree {plain:.2f} ms, PointTree {fast:.2f} ms per batch, x{fast / plain:.3f}  answers "
+                  f"differing: {differ}", flush=True)
     return 0
 
 

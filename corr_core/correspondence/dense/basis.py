@@ -81,10 +81,13 @@ class MeshBasis:
             return N
         return self.cached("vertex_normals", make)
 
-    def tree(self) -> cKDTree:
-        """A k-d tree of the vertices (n,3), made on first use and then shared by every refinement step and
-        starting map of this mesh (a query's answer depends only on its point, so sharing changes no result)."""
-        return self.cached("vertex_tree", lambda: cKDTree(self.V))
+    def tree(self):
+        """A k-d tree of the vertices (n,3) (``nearest.PointTree``), made on first use and then shared by every
+        refinement step and starting map of this mesh (a query's answer depends only on its point, so sharing
+        changes no result)."""
+        from corr_core.correspondence.dense.nearest import PointTree
+
+        return self.cached("vertex_tree", lambda: PointTree(self.V))
 
     def vertex_cells(self, n_centres: int | None = None, n_regions: int | None = None):
         """The vertices partitioned into cells (``fmaps.RowCells``, for ``fmaps.nearest_rows``' pruned search over
@@ -93,11 +96,12 @@ class MeshBasis:
         n_centres / 16) to their centre, then by centre. Made on first use, then shared. The partition only sets
         the speed: any gives the same answer.
 
-        Half the samples and 1/16 of that: the fastest of 500 / 700 / 1000 centres x 32 / 64 / 128 regions on
-        generated other bodies at 1,000 samples (500 / 32, x0.652 of the brute force's time; `python
-        bench/nearest_cells.py --seeds 0-5 --poses 6 --centres 1000,700,500 --regions 32,64,128`), and of
-        2000 / 1000 / 700 x 32 / 64 / 128 on two course poses at 2,000 samples (1000 / 64, x0.353; `python
-        bench/nearest_cells.py --seeds 0-1 --poses 3 --data ../shared/data/hw3/scape --pairs 2`).
+        Half the samples and 1/16 of that: on generated other bodies at 1,000 samples, of 500 / 700 / 1000 centres
+        x 32 / 64 / 128 regions, 500 / 32 and 500 / 64 were the fastest (x0.695 of the brute force's time, mean of
+        6 seeds; `python bench/dense_searches.py --seeds 0-5 --poses 6 --centres 1000,700,500 --regions
+        32,64,128`); on two course poses at 2,000 samples, of 2000 / 1000 / 700 x 32 / 64 / 128, 1000 / 64 and
+        1000 / 128 (x0.294; `python bench/dense_searches.py --seeds '' --data ../shared/data/hw3/scape --pairs 2
+        --centres 2000,1000,700 --regions 32,64,128`).
         """
         from corr_core.correspondence.dense.fmaps import RowCells
 

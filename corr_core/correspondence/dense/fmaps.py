@@ -192,8 +192,8 @@ def _nearest_rows_in_cells(queries: np.ndarray, points: np.ndarray, sq: np.ndarr
     (float32, ties to the lowest row); the bounds are widened by a bound on float32's rounding of
     ``|x|^2 - 2 x.y`` so that rounding never prunes the nearest row. A spectral embedding is a surface in k
     dimensions, so a query needs a few cells: with ``MeshBasis.vertex_cells`` 0.35 of the brute force's time for
-    2,000 queries among a course pose's 12,500 vertices, 0.56-0.67 for 1,000 among a generated body's 4,700
-    (``bench/nearest_cells.py``).
+    2,000 queries among a course pose's 12,500 vertices, 0.6-0.7 for 1,000 among a generated body's 4,700
+    (``bench/dense_searches.py``).
     """
     centres = np.asarray(cells.centres, dtype=np.int64)
     owner = np.asarray(cells.owner, dtype=np.int64)

@@ -2,15 +2,38 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
+from pykdtree.kdtree import KDTree
 
 
-def nearest_compatible(tree: cKDTree, normals_t: np.ndarray, P: np.ndarray, normals_p: np.ndarray, *,
+class PointTree:
+    """Exact nearest points of a fixed 3-D point set: ``PointTree(points)`` with points (n,3) float;
+    ``query(P, k=1)``: P (q,3) -> distances (q,) float and ids (q,) int64 for k = 1, (q,k) each for k > 1 (nearest
+    first, k clipped to n), as ``scipy.spatial.cKDTree.query``.
+
+    pykdtree's k-d tree: on the refinement's queries it takes 0.62-0.64 of cKDTree's time with the same answers
+    (``bench/dense_searches.py``, "vertices"); equidistant points may come in another order than cKDTree's.
+    Its OpenMP threads follow OMP_NUM_THREADS (1 in the engine's workers); each query's answer depends only on
+    its point, never on the threads."""
+
+    def __init__(self, points: np.ndarray):
+        self.points = np.ascontiguousarray(points, dtype=np.float64)
+        if self.points.ndim != 2 or self.points.shape[1] != 3 or not len(self.points):
+            raise ValueError(f"PointTree: need (n >= 1, 3) points, got shape {self.points.shape}")
+        self._tree = KDTree(self.points)
+
+    def query(self, P: np.ndarray, k: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        """Distances and ids of the ``k`` nearest points of each row of P (q,3) (see the class)."""
+        P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
+        d, ids = self._tree.query(P, k=int(min(k, len(self.points))))
+        return d, ids.astype(np.int64)
+
+
+def nearest_compatible(tree: PointTree, normals_t: np.ndarray, P: np.ndarray, normals_p: np.ndarray, *,
                        min_cos: float, k: int = 8) -> tuple[np.ndarray, np.ndarray]:
     """Nearest target vertex to each point P (q,3) among its ``k`` nearest whose normal (n_t,3) makes a cosine
     > ``min_cos`` with the point's normal (q,3): (ids (q,) int, distances (q,) float, inf when none qualifies).
 
-    ``tree`` is a k-d tree of the target vertices (n_t,3). The normal test rejects a touching body part (it faces
+    ``tree`` is a ``PointTree`` of the target vertices (n_t,3). The normal test rejects a touching body part (it faces
     the other way) and the other side of a thin part.
 
     Most points' nearest vertex already agrees, so the two nearest are found first: a point whose nearest agrees
@@ -28,7 +51,7 @@ def nearest_compatible(tree: cKDTree, normals_t: np.ndarray, P: np.ndarray, norm
     return ids, dist
 
 
-def _nearest_compatible_among(tree: cKDTree, normals_t: np.ndarray, P: np.ndarray, normals_p: np.ndarray,
+def _nearest_compatible_among(tree: PointTree, normals_t: np.ndarray, P: np.ndarray, normals_p: np.ndarray,
                               min_cos: float, k: int) -> tuple[np.ndarray, np.ndarray]:
     """``nearest_compatible`` by one search among the ``k`` nearest of every point (ties: the k-d tree's order)."""
     d, c = tree.query(P, k=k)
@@ -44,19 +67,19 @@ class VertexNeighbourhoods:
     the first time it is asked for and then kept. A refinement asks for the neighbourhoods of a map's images in
     every round (``refine.upsample_spectral``, ``refine.refine_spectral``), and most images repeat: within a map
     (an upsampled map has one image per template sample) and from one round or starting map to the next. The rows
-    are those of ``cKDTree(V).query(V[ids], k)``, bit for bit (a query's answer depends only on its point).
+    are those of ``PointTree(V).query(V[ids], k)``, bit for bit (a query's answer depends only on its point).
 
-    ``VertexNeighbourhoods(V, k, tree=None)``: V (n,3) float; k clipped to n; tree: a ``cKDTree`` of V to share
+    ``VertexNeighbourhoods(V, k, tree=None)``: V (n,3) float; k clipped to n; tree: a ``PointTree`` of V to share
     (None: one is made). ``of(ids)``: ids (q,) int vertex ids ->
     (q, k) int neighbour ids, nearest first."""
 
-    def __init__(self, V: np.ndarray, k: int, tree: cKDTree | None = None):
+    def __init__(self, V: np.ndarray, k: int, tree: PointTree | None = None):
         self.V = np.asarray(V, dtype=np.float64)
         self.k = int(min(k, len(self.V)))
         if self.k < 1:
             raise ValueError(f"VertexNeighbourhoods: need k >= 1 and at least one vertex, got k={k}, {len(V)} "
                              f"vertices")
-        self._tree = cKDTree(self.V) if tree is None else tree
+        self._tree = PointTree(self.V) if tree is None else tree
         self._rows = np.empty((len(self.V), self.k), dtype=np.int64)
         self._known = np.zeros(len(self.V), dtype=bool)
 

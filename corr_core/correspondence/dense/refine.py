@@ -38,7 +38,7 @@ from scipy.spatial import cKDTree
 from corr_core.correspondence.dense.basis import MeshBasis, map_to_local
 from corr_core.correspondence.dense.deform import refine_deform, refine_settle
 from corr_core.correspondence.dense.fmaps import fmap_from_p2p
-from corr_core.correspondence.dense.nearest import nearest_compatible, vertex_neighbourhoods
+from corr_core.correspondence.dense.nearest import PointTree, nearest_compatible, vertex_neighbourhoods
 from corr_core.geometry.primitives import unique_edges
 
 
@@ -250,7 +250,7 @@ def _read_only(a: np.ndarray) -> np.ndarray:
     return a
 
 
-def _icp_pairs(tree: cKDTree, normals_t: np.ndarray, moved: np.ndarray, patch_normals: np.ndarray, R: np.ndarray,
+def _icp_pairs(tree: PointTree, normals_t: np.ndarray, moved: np.ndarray, patch_normals: np.ndarray, R: np.ndarray,
                normal_cos: float) -> tuple[np.ndarray, np.ndarray]:
     """ICP partners of the moved patch points (b,p,3): target ids (b,p) int and distances (b,p) float (inf: no
     compatible partner). ``normal_cos`` <= -1: no normal test, the plain nearest vertex (one k-d tree query per
@@ -272,7 +272,7 @@ def _finite_row_median(d: np.ndarray, finite: np.ndarray) -> np.ndarray:
     return np.array([np.median(row[ok]) if ok.any() else 0.0 for row, ok in zip(d, finite)])[:, None]
 
 
-def _assign(tree: cKDTree, target: MeshBasis, p2p: np.ndarray, moved: np.ndarray, moved_normals: np.ndarray,
+def _assign(tree: PointTree, target: MeshBasis, p2p: np.ndarray, moved: np.ndarray, moved_normals: np.ndarray,
             normals_t: np.ndarray, n_candidates: int | None) -> np.ndarray:
     """Target vertex of every moved template vertex (n_s,3): the nearest normal-compatible one (None), or the
     nearest among the ``n_candidates`` nearest to the current image; the current image where none qualifies."""

@@ -6,7 +6,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from corr_core.correspondence.dense import measures, mesh_basis, refine_extrinsic
-from corr_core.correspondence.dense.nearest import VertexNeighbourhoods, nearest_compatible
+from corr_core.correspondence.dense.nearest import PointTree, VertexNeighbourhoods, nearest_compatible
 
 FAST = {"n_patches": 120, "rounds": 5}
 
@@ -79,6 +79,21 @@ def test_nearest_compatible_answers_as_the_search_among_k_for_every_point():
     assert np.isinf(nearest_compatible(tree, N, P, NP, min_cos=0.9, k=3)[1]).any()
 
 
+def test_point_tree_answers_as_scipy_ckdtree():
+    """Distances and ids of cKDTree's query, bit for bit, for k = 1 (1-D results) and k > 1 (nearest first), k
+    clipped to the point count; int64 ids; a bad point set is refused by name."""
+    rng = np.random.default_rng(4)
+    V, P = rng.normal(size=(500, 3)), rng.normal(size=(200, 3))
+    tree, reference = PointTree(V), cKDTree(V)
+    for k in (1, 2, 8):
+        (d, ids), (d_ref, ids_ref) = tree.query(P, k=k), reference.query(P, k=k)
+        assert ids.dtype == np.int64 and d.shape == ids.shape == ids_ref.shape
+        assert np.array_equal(ids, ids_ref) and np.array_equal(d, d_ref)
+    assert PointTree(V[:3]).query(P, k=8)[1].shape == (200, 3)
+    with pytest.raises(ValueError, match="PointTree"):
+        PointTree(V[:, :2])
+
+
 def test_vertex_neighbourhoods_are_the_k_d_tree_rows_each_found_once():
     """The kept rows equal a fresh query of the same vertices, bit for bit, in a second call that asks for old
     and new vertices (repeats included); only vertices never asked for are queried; k is clipped to the count."""
@@ -95,7 +110,7 @@ def test_vertex_neighbourhoods_are_the_k_d_tree_rows_each_found_once():
     table._tree = CountingTree()
     first, second = rng.integers(0, 400, 300), np.concatenate([rng.integers(0, 400, 200), [7, 8, 7]])
     for ids in (first, second):
-        assert np.array_equal(table.of(ids), cKDTree(V).query(V[ids], k=12)[1])
+        assert np.array_equal(table.of(ids), PointTree(V).query(V[ids], k=12)[1])
     assert queried == [len(np.unique(first)), len(np.setdiff1d(second, first))]
     assert VertexNeighbourhoods(V[:5], 12).of(np.arange(5)).shape == (5, 5)
 
