@@ -47,9 +47,9 @@ def recorded_searches(V_s, F_s, S, targets, k_init: int) -> tuple[list, list]:
             spectral.append((current["T"], np.array(queries, dtype=np.float32), np.array(points, dtype=np.float32)))
         return real_rows(queries, points, chunk=chunk, cells=cells)
 
-    def spy_query(tree, P, k=1):
+    def spy_query(tree, P, *, k=1):
         vertices.append((tree.points, np.array(P, dtype=np.float64), k))
-        return real_query(tree, P, k)
+        return real_query(tree, P, k=k)
 
     fmaps.nearest_rows, nearest.PointTree.query = spy_rows, spy_query
     try:

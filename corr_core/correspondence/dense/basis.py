@@ -20,6 +20,7 @@ import numpy as np
 import scipy.sparse.linalg as sla
 from scipy.spatial import cKDTree
 
+from corr_core.correspondence.dense.nearest import PointTree, RowCells
 from corr_core.geometry import geodesic
 from corr_core.geometry.intrinsic import IntrinsicMesh
 from corr_core.geometry.laplacian import laplacian_and_mass, start_vector
@@ -85,12 +86,10 @@ class MeshBasis:
         """A k-d tree of the vertices (n,3) (``nearest.PointTree``), made on first use and then shared by every
         refinement step and starting map of this mesh (a query's answer depends only on its point, so sharing
         changes no result)."""
-        from corr_core.correspondence.dense.nearest import PointTree
-
         return self.cached("vertex_tree", lambda: PointTree(self.V))
 
     def vertex_cells(self, n_centres: int | None = None, n_regions: int | None = None):
-        """The vertices partitioned into cells (``fmaps.RowCells``, for ``fmaps.nearest_rows``' pruned search over
+        """The vertices partitioned into cells (``nearest.RowCells``, for ``fmaps.nearest_rows``' pruned search over
         all vertices): centres the first ``n_centres`` samples (None: half the samples), every vertex in the cell
         of its nearest centre (Euclidean), cells ranked by the nearest of the first ``n_regions`` samples (None:
         n_centres / 16) to their centre, then by centre. Made on first use, then shared. The partition only sets
@@ -103,8 +102,6 @@ class MeshBasis:
         1000 / 128 (x0.294; `python bench/dense_searches.py --seeds '' --data ../shared/data/hw3/scape --pairs 2
         --centres 2000,1000,700 --regions 32,64,128`).
         """
-        from corr_core.correspondence.dense.fmaps import RowCells
-
         n_centres = max(1, len(self.samples) // 2) if n_centres is None else int(n_centres)
         n_regions = max(1, n_centres // 16) if n_regions is None else int(n_regions)
 

@@ -16,11 +16,10 @@ The problem is quadratic: it is solved exactly by one dense linear system of siz
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from corr_core.correspondence.dense.basis import MeshBasis, face_gradients
+from corr_core.correspondence.dense.nearest import RowCells
 from corr_core.geometry.primitives import face_areas, face_normals
 
 
@@ -127,23 +126,6 @@ def fmap_from_p2p(p2p: np.ndarray, Phi_S_rows: np.ndarray, Phi_T: np.ndarray) ->
         except LinAlgError:
             pass
     return np.linalg.lstsq(Phi_S_rows, rhs, rcond=None)[0]
-
-
-@dataclass(frozen=True)
-class RowCells:
-    """A partition of the rows of a point set into cells, for ``nearest_rows``' exact pruned search.
-
-    Attributes:
-        centres: (c,) int the row of each cell's centre (a row of the points).
-        owner: (p,) int the cell of every row (index into ``centres``; a centre owns itself).
-        rank: (c,) int position of each cell in an order that keeps neighbouring cells together (queries whose
-            nearest centres are close in this order are searched together).
-    Any partition gives the exact nearest rows; one of compact cells (``MeshBasis.vertex_cells``: each vertex
-    with its nearest sample) makes the search fast.
-    """
-    centres: np.ndarray
-    owner: np.ndarray
-    rank: np.ndarray
 
 
 def nearest_rows(queries: np.ndarray, points: np.ndarray, *, chunk: int = 256,

@@ -1,13 +1,34 @@
-"""Nearest target vertex whose normal agrees: the closest-point query every refinement step shares."""
+"""Nearest target vertex whose normal agrees: the closest-point query every refinement step shares; the exact
+3-D point tree behind it (``PointTree``); the cells of ``fmaps.nearest_rows``' pruned spectral search
+(``RowCells``)."""
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from pykdtree.kdtree import KDTree
 
 
+@dataclass(frozen=True)
+class RowCells:
+    """A partition of the rows of a point set into cells, for ``nearest_rows``' exact pruned search.
+
+    Attributes:
+        centres: (c,) int the row of each cell's centre (a row of the points).
+        owner: (p,) int the cell of every row (index into ``centres``; a centre owns itself).
+        rank: (c,) int position of each cell in an order that keeps neighbouring cells together (queries whose
+            nearest centres are close in this order are searched together).
+    Any partition gives the exact nearest rows; one of compact cells (``MeshBasis.vertex_cells``: each vertex
+    with its nearest sample) makes the search fast.
+    """
+    centres: np.ndarray
+    owner: np.ndarray
+    rank: np.ndarray
+
+
 class PointTree:
     """Exact nearest points of a fixed 3-D point set: ``PointTree(points)`` with points (n,3) float;
-    ``query(P, k=1)``: P (q,3) -> distances (q,) float and ids (q,) int64 for k = 1, (q,k) each for k > 1 (nearest
+    ``query(P, *, k=1)``: P (q,3) -> distances (q,) float and ids (q,) int64 for k = 1, (q,k) each for k > 1 (nearest
     first, k clipped to n), as ``scipy.spatial.cKDTree.query``.
 
     pykdtree's k-d tree: on the refinement's queries it takes 0.62-0.64 of cKDTree's time with the same answers
@@ -21,7 +42,7 @@ class PointTree:
             raise ValueError(f"PointTree: need (n >= 1, 3) points, got shape {self.points.shape}")
         self._tree = KDTree(self.points)
 
-    def query(self, P: np.ndarray, k: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    def query(self, P: np.ndarray, *, k: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """Distances and ids of the ``k`` nearest points of each row of P (q,3) (see the class)."""
         P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
         d, ids = self._tree.query(P, k=int(min(k, len(self.points))))
