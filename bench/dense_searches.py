@@ -62,19 +62,30 @@ def recorded_searches(V_s, F_s, S, targets, k_init: int) -> tuple[list, list]:
     return spectral, vertices
 
 
-def time_searches(searches, centres: int | None, regions: int | None) -> tuple[float, int]:
-    """(mean CPU ms per search, answers differing from the brute force) with these cells (False: brute force;
-    None: ``vertex_cells``' defaults)."""
+def brute_force(searches) -> tuple[float, list]:
+    """(mean CPU ms per search, the answers) of the brute force over the recorded spectral searches."""
+    from corr_core.correspondence.dense import fmaps
+
+    seconds, answers = 0.0, []
+    for _, queries, points in searches:
+        t0 = time.process_time()
+        answers.append(fmaps.nearest_rows(queries, points))
+        seconds += time.process_time() - t0
+    return 1000.0 * seconds / max(len(searches), 1), answers
+
+
+def time_searches(searches, brute_answers: list, centres: int | None, regions: int | None) -> tuple[float, int]:
+    """(mean CPU ms per search, answers differing from ``brute_answers``) with these cells (None: ``vertex_cells``'
+    defaults)."""
     from corr_core.correspondence.dense import fmaps
 
     seconds, differ = 0.0, 0
-    for T, queries, points in searches:
-        cells = None if centres is False else T.vertex_cells(centres, regions)
+    for (T, queries, points), brute in zip(searches, brute_answers):
+        cells = T.vertex_cells(centres, regions)
         t0 = time.process_time()
         found = fmaps.nearest_rows(queries, points, cells=cells)
         seconds += time.process_time() - t0
-        if cells is not None:
-            differ += int((found != fmaps.nearest_rows(queries, points)).sum())
+        differ += int((found != brute).sum())
     return 1000.0 * seconds / max(len(searches), 1), differ
 
 
@@ -128,18 +139,9 @@ def course(data: str, pairs: int):
         (os.path.splitext(os.path.basename(p))[0], *load_mesh(p)) for p in tests], 40
 
 
-def ints(text: str) -> list[int]:
-    """"0-2,5" -> [0, 1, 2, 5]."""
-    out = []
-    for part in text.split(","):
-        a, _, b = part.partition("-")
-        out += list(range(int(a), int(b or a) + 1))
-    return out
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seeds", default="0-1", help="generated seeds (other bodies), e.g. 0-1; '' for none")
+    ap.add_argument("--seeds", default="0-1", help="generated seeds (other bodies), e.g. 0-1 or 0,3; '' for none")
     ap.add_argument("--poses", type=int, default=3)
     ap.add_argument("--data", default=None, help="also a course-layout folder (meshes/template, meshes/test)")
     ap.add_argument("--pairs", type=int, default=2)
@@ -147,23 +149,24 @@ def main(argv=None) -> int:
     ap.add_argument("--regions", default="64")
     ap.add_argument("--work", default=None, help="folder for the generated data (default: a temporary one)")
     args = ap.parse_args(argv)
+    from bench.dense_hypotheses import seed_range
 
     sets = []
     with tempfile.TemporaryDirectory() as tmp:
         if args.seeds:
-            sets += list(generated(ints(args.seeds), args.poses, args.work or tmp))
+            sets += list(generated(seed_range(args.seeds), args.poses, args.work or tmp))
         if args.data:
             sets += list(course(args.data, args.pairs))
-        grid = [(c, r) for c in ints(args.centres) for r in ints(args.regions)]
+        grid = [(c, r) for c in seed_range(args.centres) for r in seed_range(args.regions)]
         for label, V_s, F_s, S, targets, k_init in sets:
             searches, vertex_queries = recorded_searches(V_s, F_s, S, targets, k_init)
             n_t = int(np.mean([len(p) for _, _, p in searches]))
-            brute, _ = time_searches(searches, False, False)
+            brute, brute_answers = brute_force(searches)
             print(f"{label}: {len(searches)} all-vertex searches of {len(targets)} automatic maps, "
                   f"{searches[0][1].shape[0]} queries among {n_t} target vertices (mean); brute force "
                   f"{brute:.1f} ms per search", flush=True)
             for centres, regions in [(None, None)] + grid:
-                ms, differ = time_searches(searches, centres, regions)
+                ms, differ = time_searches(searches, brute_answers, centres, regions)
                 setting = "default (MeshBasis.vertex_cells)" if centres is None else \
                     f"{centres:5d} centres {regions:4d} regions"
                 print(f"  cells {setting}: {ms:6.1f} ms  x{ms / brute:.3f} of the "

@@ -173,8 +173,8 @@ def _nearest_rows_in_cells(queries: np.ndarray, points: np.ndarray, sq: np.ndarr
     members of every cell one of them still needs, in ascending row order. The scores are the brute force's
     (float32, ties to the lowest row); the bounds are widened by a bound on float32's rounding of
     ``|x|^2 - 2 x.y`` so that rounding never prunes the nearest row. A spectral embedding is a surface in k
-    dimensions, so a query needs a few cells: with ``MeshBasis.vertex_cells`` 0.35 of the brute force's time for
-    2,000 queries among a course pose's 12,500 vertices, 0.6-0.7 for 1,000 among a generated body's 4,700
+    dimensions, so a query needs a few cells: with ``MeshBasis.vertex_cells`` 0.32-0.38 of the brute force's time for
+    2,000 queries among a course pose's 12,500 vertices, 0.61-0.69 for 1,000 among a generated body's 4,700
     (``bench/dense_searches.py``).
     """
     centres = np.asarray(cells.centres, dtype=np.int64)
