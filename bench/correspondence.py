@@ -284,6 +284,8 @@ def main(argv=None) -> int:
     ap.add_argument("--eval-vertices", type=int, default=2000, help="farthest-point template vertices evaluated")
     ap.add_argument("--refine", default=None, help="the dense methods' refinement plan (refine.refine_plan, e.g. "
                     "extrinsic+deform; default: dense_map's)")
+    ap.add_argument("--refine-options", default=None, metavar="JSON",
+                    help='the dense methods\' refine_options, e.g. \'{"deform": {"iterations": 6}}\'')
     ap.add_argument("--json", default=None, help="write per-pair and summary results here")
     ap.add_argument("--save-maps", default=None, metavar="DIR",
                     help="also write every map as DIR/<method>/<mesh>.txt (one target vertex id a line)")
@@ -304,6 +306,8 @@ def main(argv=None) -> int:
     from corr_core.geometry.mesh_io import load_mesh
 
     plan = {} if args.refine is None else {"refine": args.refine}
+    if args.refine_options:
+        plan["refine_options"] = json.loads(args.refine_options)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     unknown = sorted(set(methods) - set(METHODS))
     if unknown:

@@ -26,36 +26,50 @@ def dask_client(tmp_path_factory):
     cluster.close()
 
 
-# Seconds each long module took (--durations, one run, machine shared): the 2 pytest-xdist workers (-n 2 in
-# pyproject.toml's addopts) take the longest first, so no long module starts last while the other worker idles.
-# Modules not listed keep the collection order after these.
+# Seconds each long module's tests took (--durations=0, quiet machine, 2026-12-03), apart for the README's test
+# command (LONG_MODULES: the tests not marked e2e) and for the e2e run (LONG_E2E_MODULES: pytest -m e2e). The 2
+# pytest-xdist workers (-n 2 in pyproject.toml's addopts) take the longest xdist group first (a group's weight is
+# the sum over its modules), so no long group starts last while the other worker idles. Groups not listed keep the
+# collection order after these.
 LONG_MODULES = {
-    "tests/stages/test_cli.py": 347, "tests/pipelines/test_dense_pipeline.py": 321,
-    "tests/pipelines/test_correspondence_pipeline.py": 229, "tests/stages/test_store_s3.py": 216,
-    "tests/stages/test_help_examples.py": 113, "tests/pipelines/test_alignment_pipeline.py": 106,
-    "tests/corr_core/correspondence/dense/test_dense_map.py": 100, "tests/stages/test_candidates.py": 72,
-    "tests/corr_core/correspondence/test_orientation.py": 56, "tests/stages/test_user_errors.py": 52,
-    "tests/stages/test_report_browser.py": 47, "tests/stages/test_cli_in_process.py": 36,
-    "tests/corr_core/alignment/test_sync.py": 32, "tests/stages/test_log_lines.py": 24,
-    "tests/stages/test_cache_integrity.py": 24, "tests/stages/test_pure_planning.py": 22,
+    "tests/pipelines/test_correspondence_pipeline.py": 60, "tests/stages/test_store_s3.py": 59,
+    "tests/pipelines/test_dense_pipeline.py": 53, "tests/stages/test_help_examples.py": 38,
+    "tests/corr_core/correspondence/dense/test_dense_map.py": 27, "tests/stages/test_user_errors.py": 26,
+    "tests/stages/test_cli.py": 18, "tests/pipelines/test_alignment_pipeline.py": 15,
+    "tests/stages/test_candidates.py": 13, "tests/corr_core/correspondence/test_orientation.py": 11,
+    "tests/stages/test_cache_integrity.py": 9, "tests/stages/test_cli_in_process.py": 9,
+    "tests/pipelines/test_tables_pipeline.py": 8, "tests/corr_core/alignment/test_continuous.py": 8,
+    "tests/pipelines/test_candidate_graph.py": 8, "tests/stages/test_run.py": 7, "tests/test_packaging.py": 7,
+    "tests/stages/test_report_browser.py": 6,
+}
+LONG_E2E_MODULES = {
+    "tests/pipelines/test_code_audit.py": 77, "tests/stages/test_cli.py": 71,
+    "tests/pipelines/test_deterministic.py": 60, "tests/pipelines/test_default_pipeline.py": 53,
+    "tests/pipelines/test_scale.py": 21, "tests/stages/test_failed_items.py": 16, "tests/stages/test_store_s3.py": 16,
+    "tests/stages/test_report_browser.py": 10, "tests/stages/test_user_errors.py": 8,
 }
 # Session fixtures shared across modules: the modules using one run on the same xdist worker (one run each).
 SHARED_SESSION_FIXTURES = ("default_cold_run",)
 
 
-@pytest.hookimpl(tryfirst=True)   # before xdist's worker reads the xdist_group marks
+@pytest.hookimpl(tryfirst=True)   # before xdist's worker reads the xdist_group marks, and before -m deselects
 def pytest_collection_modifyitems(config, items):
     # One xdist group per module (--dist loadgroup): a module's tests run in order on one worker, so its module
     # fixtures (a generated dataset, a pipeline run, a cache its tests build on) are computed once.
+    group_of = {}
     for item in items:
         module = item.nodeid.split("::")[0]
         shared = [f for f in SHARED_SESSION_FIXTURES if f in getattr(item, "fixturenames", ())]
-        item.add_marker(pytest.mark.xdist_group(shared[0] if shared else module))
-    weight = {}
+        group_of[item.nodeid] = shared[0] if shared else module
+        item.add_marker(pytest.mark.xdist_group(group_of[item.nodeid]))
+    # weight of (group, e2e or not): the sum of its modules' seconds in that run
+    modules = {}
     for item in items:
-        module = item.nodeid.split("::")[0]
-        weight.setdefault(module, LONG_MODULES.get(module, 0))
-    items.sort(key=lambda item: -weight[item.nodeid.split("::")[0]])   # stable: order within a module kept
+        key = (group_of[item.nodeid], item.get_closest_marker("e2e") is not None)
+        modules.setdefault(key, set()).add(item.nodeid.split("::")[0])
+    weight = {key: sum((LONG_E2E_MODULES if key[1] else LONG_MODULES).get(m, 0) for m in mods)
+              for key, mods in modules.items()}
+    items.sort(key=lambda item: -weight[(group_of[item.nodeid], item.get_closest_marker("e2e") is not None)])
 
     if COURSE_DATA.is_dir():
         return

@@ -71,6 +71,7 @@ def _assert_same_final_values(project, folder, clean, work: str) -> None:
             assert a[k] == b[k]
 
 
+@pytest.mark.e2e   # a whole multi-process run: .ci/run (pytest -m e2e), not the README's test command
 def test_kill_9_then_resume_equals_uninterrupted_run(tmp_path):
     work = "100"  # ms per item: the run takes a few seconds
     slow = tmp_path / "killed"
@@ -121,6 +122,7 @@ def _worker_processes(pid: int) -> list:
     return out
 
 
+@pytest.mark.e2e   # a whole multi-process run: .ci/run (pytest -m e2e), not the README's test command
 def test_a_worker_killed_mid_run_then_resume_equals_uninterrupted_run(tmp_path):
     """SIGKILL to one dask worker process (not the CLI) while tasks run: the run finishes (the task is run again
     elsewhere, or reported failed), nothing stored is lost, and a resumed run gives the values of an
@@ -163,6 +165,7 @@ def test_a_worker_killed_mid_run_then_resume_equals_uninterrupted_run(tmp_path):
         (clean / "results" / "syn" / "rep" / "summary.txt").read_bytes()
 
 
+@pytest.mark.e2e   # a whole multi-process run: .ci/run (pytest -m e2e), not the README's test command
 def test_two_runs_at_once_on_one_cache(tmp_path):
     make_project(tmp_path, n=30)
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -230,6 +233,7 @@ def test_code_change_reruns_only_dependent_stages(tmp_path):
     assert ex == {"feat": 0, "dist": 0, "summary": 0, "rep": 0, "doubled": 8, "total": 1}
 
 
+@pytest.mark.e2e   # a whole multi-process run: .ci/run (pytest -m e2e), not the README's test command
 def test_pipeline_on_an_external_dask_cluster(tmp_path):
     make_project(tmp_path, n=10)
     with ExternalCluster(tmp_path, n_workers=2) as cluster:

@@ -36,6 +36,7 @@ def _screenshot_path() -> str:
     return os.environ.get("REPORT_SCREENSHOT") or os.path.join(tempfile.gettempdir(), "report_first_screen.png")
 
 
+@pytest.mark.e2e   # a whole multi-process run: .ci/run (pytest -m e2e), not the README's test command
 def test_report_in_headless_chromium(project, tmp_path):  # noqa: F811
     path = str(project)
     api.run(path, workers=0, quiet=True)

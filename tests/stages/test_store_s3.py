@@ -373,6 +373,7 @@ def test_missing_credentials_are_an_error_line_saying_what_to_set(project, tmp_p
     assert "AWS_ACCESS_KEY_ID" in r.stderr
 
 
+@pytest.mark.e2e   # a whole multi-process run: .ci/run (pytest -m e2e), not the README's test command
 def test_a_server_killed_mid_run_keeps_what_was_stored(tmp_path, monkeypatch):
     """The S3 server stops while a run stores per-item results: the run ends with an error line naming the
     endpoint (no traceback); once the server is back, every entry stored before is there and complete, and the

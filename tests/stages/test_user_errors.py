@@ -239,6 +239,7 @@ def _sigint_default():
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+@pytest.mark.e2e   # a whole multi-process run: .ci/run (pytest -m e2e), not the README's test command
 def test_ctrl_c_to_the_process_group_shuts_down_without_worker_tracebacks(project, tmp_path):
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     proc = subprocess.Popen([sys.executable, "-m", "stages", "run", str(project), "--set", "work=2000",
