@@ -4,8 +4,9 @@ generated data (never the course poses).
 Per seed, ``write_humanoid_dataset(n_poses, seed, vary_bodies=...)`` with a decimated, vertex-shuffled copy of pose 1;
 for every target the map from the 5 sparse landmarks (``map_from_points``, as dense_sparse makes it) is upsampled
 and refined by "extrinsic+spectral", then by each variant of the last step: the default "deform" (3 iterations per
-round, 10 rounds), "deform" then a second pass with 6 iterations per round, and single passes with more
-iterations or rounds. Printed per target: each variant's mean geodesic error / sqrt(area) at 500 template samples;
+round, 10 rounds), "deform" then a second pass with 6 iterations per round, single passes with more
+iterations or rounds, and a weaker pull toward the current images ("anchor W": ``anchor_weight`` W instead of 0.5,
+alone or as a second pass). Printed per target: each variant's mean geodesic error / sqrt(area) at 500 template samples;
 the summary: mean error per variant, targets lower than the default, CPU seconds of the variant.
 Settings as ``bench/dense_hypotheses.py`` (k 60, 1000 samples, 150 patches).
 
@@ -32,7 +33,10 @@ from bench.dense_hypotheses import SETTINGS, generated_targets, generated_templa
 
 VARIANTS = {"deform (default)": [{}], "deform + deform(6 it)": [{}, {"iterations": 6}],
             "deform(6 it)": [{"iterations": 6}], "deform(10 it)": [{"iterations": 10}],
-            "deform(6 it, 20 rounds)": [{"iterations": 6, "rounds": 20}]}
+            "deform(6 it, 20 rounds)": [{"iterations": 6, "rounds": 20}],
+            "anchor 0.3": [{"anchor_weight": 0.3}], "anchor 0.2": [{"anchor_weight": 0.2}],
+            "anchor 0.1": [{"anchor_weight": 0.1}], "deform + anchor 0.2": [{}, {"anchor_weight": 0.2}],
+            "deform + anchor 0.1": [{}, {"anchor_weight": 0.1}]}
 
 
 def score(S, T, V_t, F_t, truth, sparse) -> dict:
