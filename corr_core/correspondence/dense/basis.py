@@ -33,7 +33,8 @@ class MeshBasis:
     """One mesh and its spectral basis.
 
     Attributes:
-        V: (n,3) float vertex positions (length units).
+        V: (n,3) float vertex positions, in the mesh's units divided by a power of two that brings sqrt(area)
+            into [1, 2) (``size_exponent``; none for meshes already that size).
         F: (m,3) int triangles.
         evals: (k,) float ascending Laplace-Beltrami eigenvalues (1/area units).
         evecs: (n,k) float, M-orthonormal eigenvectors (evecs.T @ diag(mass) @ evecs = I).
@@ -116,6 +117,20 @@ class MeshBasis:
                 a.setflags(write=False)
             return RowCells(centres, owner, rank)
         return self.cached(("vertex_cells", n_centres, n_regions), make)
+
+    def scaled(self, factor: float) -> "MeshBasis":
+        """The same mesh and basis with every length multiplied by ``factor`` > 0: V * factor, area and mass *
+        factor^2, eigenvalues / factor^2, eigenvectors / factor (still M-orthonormal); samples, ids and the
+        distances / sqrt(area) carried over. Exact (bit for bit) when ``factor`` is a power of two."""
+        f = float(factor)
+        out = MeshBasis(V=self.V * f, F=self.F, evals=self.evals / (f * f), evecs=self.evecs / f,
+                        mass=self.mass * (f * f), area=self.area * (f * f), samples=self.samples, vids=self.vids,
+                        n_full=self.n_full)
+        out._sample_distances = self._sample_distances
+        for key in ("vertex_normals", "extremities"):                  # unchanged by a scale
+            if key in self._derived:
+                out._derived[key] = self._derived[key]
+        return out
 
     def solver(self):
         """The heat-method geodesic solver of this mesh (built on first use, then reused)."""
@@ -271,6 +286,7 @@ def mesh_basis(V: np.ndarray, F: np.ndarray, *, k: int = 100, n_samples: int = 2
         raise ValueError(f"{name}: vertex positions of the mesh's surface contain NaN or inf")
     if len(V) < 4:
         raise ValueError(f"{name}: the largest connected component has only {len(V)} vertices")
+    V = V * 2.0 ** -size_exponent(V, F, name)          # exact: a mesh with sqrt(area) in [1, 2) is left as it is
     L, M = laplacian_and_mass(V, F)
     area = float(face_areas(V, F).sum())
     evals, evecs = basis_eigenpairs(L, M, min(k, len(V) - 1), area)
@@ -279,6 +295,39 @@ def mesh_basis(V: np.ndarray, F: np.ndarray, *, k: int = 100, n_samples: int = 2
     samples = farthest_point_samples(V, min(n_samples, len(V)), start=start)
     return MeshBasis(V=V, F=F, evals=evals, evecs=evecs, mass=mass, area=area, samples=samples, vids=mesh.vids,
                      n_full=mesh.n_full)
+
+
+def size_exponent(V: np.ndarray, F: np.ndarray, name: str = "mesh") -> int:
+    """k = floor(log2(sqrt(area))) of the surface V (n,3) float, F (m,3) int: ``mesh_basis`` keeps V / 2^k, whose
+    sqrt(area) is in [1, 2), so the eigensolver and every tolerance of the dense steps see a mesh of the same size
+    whatever its units (metres, millimetres, kilometres). A power of two scales exactly, and the meshes of the
+    pipelines (sqrt(area) 1.1 to 1.5) have k = 0: their bases are unchanged, bit for bit."""
+    area = float(face_areas(V, F).sum())
+    if not (np.isfinite(area) and area > 0):
+        raise ValueError(f"{name}: the mesh's surface has no area ({area}): its triangles are all degenerate")
+    return int(np.floor(0.5 * np.log2(area)))
+
+
+def units_exponent(source: MeshBasis, target: MeshBasis) -> int:
+    """k such that 2^k is the power of two nearest to sqrt(source.area / target.area): the factor that brings the
+    target's lengths to the template's units (a target in millimetres against a template in metres: k = -10)."""
+    return int(np.round(0.5 * np.log2(source.area / target.area)))
+
+
+def in_units_of(target: MeshBasis, source: MeshBasis) -> MeshBasis:
+    """``target`` in the units of ``source``: scaled by 2^``units_exponent`` (``MeshBasis.scaled``, exact), made
+    once per exponent and cached on ``target``; ``target`` itself when the two areas are within a factor of 2.
+
+    The rigid patch fits and the ARAP registration compare the two meshes' positions, and the functional map's
+    Laplacian term their eigenvalues, so a target in other units (a scan in millimetres, a template in metres)
+    would get a wrong map. A power of two leaves meshes of comparable size exactly as they are (every map made
+    so far, bit for bit) and changes nothing but the units; what remains is a size difference below a factor of
+    sqrt(2) in length, which the maps absorb as they absorb people of other sizes.
+    """
+    k = units_exponent(source, target)
+    if k == 0:
+        return target
+    return target.cached(("in_units", k), lambda: target.scaled(2.0 ** k))
 
 
 def map_to_original(source: MeshBasis, target: MeshBasis, p2p: np.ndarray) -> np.ndarray:

@@ -33,7 +33,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from corr_core.correspondence.dense import fmaps, zoomout
-from corr_core.correspondence.dense.basis import MeshBasis
+from corr_core.correspondence.dense.basis import MeshBasis, in_units_of
 from corr_core.geometry.primitives import vertex_adjacency
 
 LOCAL_SCALES = (0.1, 0.2, 0.4)       # widths of exp(-(d/s)^2), units sqrt(area)
@@ -94,8 +94,8 @@ def fmap_from_points(source: MeshBasis, target: MeshBasis, points_source: np.nda
     Om_S = Om_T = None
     if w_orient > 0:
         Om_S, Om_T = fmaps.orientation_operators(source, FS, k), fmaps.orientation_operators(target, FT, k)
-    return fmaps.fit_functional_map(A_S, A_T, source.evals, target.evals, Om_S, Om_T, w_lap=w_lap,
-                                    w_orient=w_orient)
+    evals_T = in_units_of(target, source).evals         # the Laplacian term compares eigenvalues: same units
+    return fmaps.fit_functional_map(A_S, A_T, source.evals, evals_T, Om_S, Om_T, w_lap=w_lap, w_orient=w_orient)
 
 
 def map_from_points(source: MeshBasis, target: MeshBasis, points_source, points_target, *, k_init: int = 40,

@@ -106,6 +106,39 @@ def test_automatic_map_to_a_rigidly_moved_pose_keeps_left_and_right(body):
     assert _sides_kept(body, Vm, body["F"], p2p, truth)          # a left/right flip fails this
 
 
+def test_a_target_in_other_units_gets_the_map_of_the_target_as_it_is(body):
+    """The target x1024 (exact): the same maps, bit for bit, in both modes. In millimetres (x1000) or kilometres
+    (x0.001) and far from the origin: maps as good as the target's as it is. Without ``size_exponent`` /
+    ``in_units_of`` the rigid patch fits, the ARAP registration, the functional map's Laplacian term and the
+    eigensolver saw a target 1000 times the template's size, and those maps were wrong almost everywhere."""
+    truth = np.arange(len(body["V"]))
+    for sparse in (None, body["sparse"]):
+        as_is = _run(body, body["Vp"], body["F"], body["T"], sparse_target=sparse)
+        V = body["Vp"] * 1024.0
+        assert np.array_equal(_run(body, V, body["F"], _basis(V, body["F"]), sparse_target=sparse), as_is)
+        error = _mean_error(body["Vp"], body["F"], as_is, truth)
+        for factor in (1000.0, 0.001):
+            V = body["Vp"] * factor + 5000.0
+            moved = _run(body, V, body["F"], _basis(V, body["F"]), sparse_target=sparse)
+            assert _mean_error(V, body["F"], moved, truth) < 1.25 * error + 0.002, (factor, sparse is None)
+
+
+def test_in_units_of_scales_by_a_power_of_two_and_leaves_comparable_sizes_alone(body):
+    from corr_core.correspondence.dense.basis import in_units_of, units_exponent
+
+    S, T = body["S"], body["T"]
+    assert units_exponent(S, T) == 0 and in_units_of(T, S) is T                # comparable sizes: untouched
+    big = T.scaled(1000.0)
+    assert units_exponent(S, big) == -10                                         # 1000 -> 1/1024
+    back = in_units_of(big, S)
+    assert back is in_units_of(big, S)                                           # made once
+    np.testing.assert_array_equal(back.V, big.V / 1024.0)
+    np.testing.assert_allclose(back.area, T.area * (1000.0 / 1024.0) ** 2)
+    np.testing.assert_allclose(back.evals[1:], T.evals[1:] * (1024.0 / 1000.0) ** 2)
+    M = back.evecs.T @ (back.mass[:, None] * back.evecs)
+    np.testing.assert_allclose(M, np.eye(M.shape[0]), atol=1e-8)                 # still M-orthonormal
+
+
 def test_automatic_map_to_the_mirror_image_is_orientation_preserving(body):
     """The mirror image (x -> -x, faces reversed) of a pose is another pose of the same symmetric body; the
     orientation-preserving truth sends vertex i to its mirror partner, the identity would reverse orientation."""
@@ -197,7 +230,7 @@ def test_two_hypotheses_give_a_good_automatic_map_and_rank_the_turn_second(body)
     first = map_automatic(body["S"], body["T"], k_init=K_INIT, k_end=K)        # map_automatic's is the first
     assert np.array_equal(first[0], Cs[0]) and np.array_equal(first[1], p2ps[0])
     samples = body["S"].samples[:len(p2ps[1])]
-    far = np.linalg.norm(body["Vp"][p2ps[1]] - body["Vp"][samples], axis=1) > 0.1 * body["T"].scale
+    far = np.linalg.norm(body["T"].V[p2ps[1]] - body["T"].V[samples], axis=1) > 0.1   # T.V: unit area
     assert far.mean() > 0.5                                           # the other hypothesis is a different map
     assert 2 <= len(automatic_hypotheses(body["S"], body["T"], k_init=K_INIT, k_end=K)) <= 3   # decided there
     with pytest.raises(ValueError, match="n must be >= 1"):

@@ -1,0 +1,60 @@
+"""Does the dense map depend on the target's units, size or position? One course pose mapped as it is and scaled
+by each factor (and moved far from the origin): per factor, the automatic map's share of template vertices sent
+to their exact vertex (the course poses share the template's triangles: vertex i <-> i is the truth), its mean
+geodesic error / sqrt(area) at 500 farthest-point template vertices, and the share of vertices mapped as with
+factor 1.
+
+Run:  python bench/dense_units.py [--data ../shared/data/hw3/scape] [--pose mesh002] [--factors 1,1.2,1.41,2,1000,0.001,0.0254,39.37]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from bench._env import one_blas_thread  # noqa: E402
+
+if __name__ == "__main__":
+    one_blas_thread()
+
+import numpy as np  # noqa: E402
+
+DEFAULT_DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "..", "shared", "data",
+                            "hw3", "scape")
+OFFSET = 5000.0   # added to every coordinate of the scaled target (units of the scaled mesh)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", default=DEFAULT_DATA, help="course scape/ folder")
+    ap.add_argument("--pose", default="mesh002")
+    ap.add_argument("--factors", default="1,1.2,1.41,2,1000,0.001,0.0254,39.37")
+    args = ap.parse_args(argv)
+
+    from corr_core.correspondence.dense import dense_map, measures
+    from corr_core.geometry.mesh_io import load_mesh
+    from corr_core.geometry.sampling import farthest_point_samples
+
+    Vs, Fs = load_mesh(os.path.join(args.data, "meshes", "template", "mesh000.obj"))
+    Vt, Ft = load_mesh(os.path.join(args.data, "meshes", "test", f"{args.pose}.obj"))
+    if not np.array_equal(Fs, Ft):
+        print(f"{args.pose}: not the template's triangles; the truth vertex i <-> i does not hold", file=sys.stderr)
+        return 2
+    truth = np.arange(len(Vs))
+    vertices = farthest_point_samples(Vs, 500, start=0)
+    first = None
+    print(f"template -> {args.pose} scaled by each factor (+{OFFSET} on every coordinate except at factor 1), "
+          "dense_auto")
+    for factor in (float(f) for f in args.factors.split(",")):
+        V = Vt if factor == 1.0 else Vt * factor + OFFSET
+        p2p = dense_map(Vs, Fs, V, Ft)
+        err = measures.dense_errors(V, Ft, {"m": p2p}, truth, vertices=vertices)["m"].mean()
+        first = p2p if first is None else first
+        print(f"  factor {factor:g}: exact vertex {np.mean(p2p == truth):.3f}  mean error {err:.4f}  "
+              f"same as the first factor's map {np.mean(p2p == first):.3f}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
