@@ -182,6 +182,44 @@ def _orient(F: np.ndarray, name: str, records: list) -> np.ndarray:
     return F
 
 
+# A mesh is turned outward when its signed volume ratio is below -OUTWARD_MARGIN. The course SCAPE poses, their
+# remeshed copies and the generated bodies have ratios 0.475 to 0.603, half a course pose cut off by a plane 0.468
+# and 0.73 (outward faces); a flat sheet has a ratio near 0 either way and is left as it is (an open curved piece
+# counts as facing its convex side).
+OUTWARD_MARGIN = 0.2
+
+
+def signed_volume_ratio(V: np.ndarray, F: np.ndarray) -> float:
+    """Signed volume of the faces F (m,3) int seen from the centroid of their vertices V (n,3) float, over the sum
+    of its terms' absolute values: near +1 for a closed surface whose faces point outward, -1 inward, near 0 for
+    a flat sheet (an open curved piece: + when its faces point to its convex side)."""
+    F = np.asarray(F, dtype=np.int64)
+    c = V[np.unique(F)].mean(axis=0)
+    a, b, d = V[F[:, 0]] - c, V[F[:, 1]] - c, V[F[:, 2]] - c
+    det = np.einsum("ij,ij->i", a, np.cross(b, d))
+    total = float(np.abs(det).sum())
+    return float(det.sum()) / total if total > 0 else 0.0
+
+
+def orient_outward(V: np.ndarray, F: np.ndarray, *, margin: float = OUTWARD_MARGIN) -> tuple[np.ndarray, float]:
+    """F (m,3) int with every face reversed when the surface clearly faces inward (``signed_volume_ratio`` below
+    -``margin``), else F itself; and that ratio (before any flip). Orientation tells left from right (the
+    correspondence methods' chirality), so a scan exported with inward normals would otherwise be matched to
+    the template's mirror image."""
+    ratio = signed_volume_ratio(V, F)
+    return (np.ascontiguousarray(F[:, ::-1]) if ratio < -margin else F), ratio
+
+
+def _outward(V: np.ndarray, F: np.ndarray, name: str, records: list) -> np.ndarray:
+    F2, ratio = orient_outward(V, F)
+    if F2 is not F:
+        records.append(_record(name, "reoriented_outward", "flipped", len(F), "repair",
+                               f"its faces pointed inward (signed volume ratio {ratio:.2f}): all "
+                               f"{counted(len(F), 'face')} flipped to point outward (orientation tells left "
+                               "from right)"))
+    return F2
+
+
 def _report_non_manifold(F: np.ndarray, name: str, records: list) -> None:
     E, count = unique_edges(F)
     bad = count > 2
@@ -242,7 +280,8 @@ def _report_boundary(F: np.ndarray, name: str, records: list) -> None:
 
 
 def repair_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", *, keep_largest_component: bool = False,
-                orient: bool = True, area_tol: float = 1e-12) -> tuple[np.ndarray, list[RepairRecord]]:
+                orient: bool = True, outward: bool = False, area_tol: float = 1e-12
+                ) -> tuple[np.ndarray, list[RepairRecord]]:
     """Repair the faces of a mesh; vertices and their ids are never changed.
 
     Steps, each reported when it finds something: drop faces repeating a vertex; drop duplicate faces (same
@@ -255,6 +294,8 @@ def repair_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", *, keep_larges
         V: (n,3) float vertex positions; F: (m,3) int faces; name: the file, for messages.
         keep_largest_component: drop every face outside the largest component (its vertices become unreferenced).
         orient: make the face orientation consistent.
+        outward: after the components step, reverse every face of a surface that clearly faces inward
+            (``orient_outward``; the correspondence meshes: orientation tells left from right).
         area_tol: a face is zero-area when area <= area_tol * (bounding-box diagonal)^2.
     Returns:
         F2: (m2,3) int64 repaired faces (a subset of the rows of F, some with their vertex order reversed);
@@ -279,6 +320,8 @@ def repair_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", *, keep_larges
     _report_non_manifold(F, name, records)
     _report_unreferenced(len(V), F, name, records)  # used by no face of the file (dropped pieces: see components)
     F = _components(V, F, keep_largest_component, name, records)
+    if outward:
+        F = _outward(V, F, name, records)
     _report_boundary(F, name, records)
     return F, records
 

@@ -14,6 +14,7 @@ ones, ``map_to_original`` a local point map to original ids. On a clean mesh bot
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,6 +26,7 @@ from corr_core.geometry import geodesic
 from corr_core.geometry.intrinsic import IntrinsicMesh
 from corr_core.geometry.laplacian import laplacian_and_mass, start_vector
 from corr_core.geometry.primitives import face_areas, face_normals, vertex_normals
+from corr_core.geometry.repair import OUTWARD_MARGIN, orient_outward
 from corr_core.geometry.sampling import farthest_point_samples
 
 
@@ -282,6 +284,10 @@ def mesh_basis(V: np.ndarray, F: np.ndarray, *, k: int = 100, n_samples: int = 2
     V, F = _check_mesh(V, F, name)
     mesh = IntrinsicMesh(V, F)
     V, F = mesh.V, mesh.F
+    F, ratio = orient_outward(V, F)
+    if ratio < -OUTWARD_MARGIN:
+        warnings.warn(f"{name}: its faces point inward (signed volume ratio {ratio:.2f}); the dense map uses them "
+                      "reversed (orientation tells left from right)", UserWarning, stacklevel=2)
     if not np.all(np.isfinite(V)):
         raise ValueError(f"{name}: vertex positions of the mesh's surface contain NaN or inf")
     if len(V) < 4:

@@ -121,6 +121,27 @@ def test_orientation_is_per_component():
     np.testing.assert_array_equal(fixed, np.vstack([F, F[:, ::-1] + n]))
 
 
+def test_outward_turns_an_inward_surface_and_leaves_outward_surfaces_and_sheets_alone():
+    V, F = sphere(500)
+    inward = np.ascontiguousarray(F[:, ::-1])
+    fixed, records = repair_mesh(V, inward, "ball.obj", outward=True)
+    np.testing.assert_array_equal(fixed, F)                                       # every face back outward
+    assert [r.kind for r in records] == ["reoriented_outward"] and records[0].level == "repair"
+    assert "ball.obj" in records[0].message and "outward" in records[0].message
+    np.testing.assert_array_equal(repair_mesh(V, inward, "ball.obj")[0], inward)  # off by default
+    fixed, records = repair_mesh(V, F, "ball.obj", outward=True)
+    np.testing.assert_array_equal(fixed, F)
+    assert records == []
+    cap = F[V[F].mean(axis=1)[:, 2] > 0.5]                                        # an open piece: its convex
+    np.testing.assert_array_equal(repair_mesh(V, cap[:, ::-1], "cap.obj", outward=True)[0], cap)   # side is out
+    x, y = np.meshgrid(np.arange(5.0), np.arange(5.0))
+    P = np.column_stack([x.ravel(), y.ravel(), np.zeros(25)])
+    i = (np.arange(4)[:, None] * 5 + np.arange(4)[None, :]).ravel()
+    sheet = np.vstack([np.column_stack([i, i + 1, i + 6]), np.column_stack([i, i + 6, i + 5])])
+    for flat in (sheet, np.ascontiguousarray(sheet[:, ::-1])):                    # flat: no side to choose
+        np.testing.assert_array_equal(repair_mesh(P, flat, "sheet.obj", outward=True)[0], flat)
+
+
 def test_keep_largest_component_keeps_vertex_ids():
     V, F = sphere(300)
     small = TET_V * 0.1 + [3.0, 0, 0]

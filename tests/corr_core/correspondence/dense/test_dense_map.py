@@ -123,6 +123,17 @@ def test_a_target_in_other_units_gets_the_map_of_the_target_as_it_is(body):
             assert _mean_error(V, body["F"], moved, truth) < 1.25 * error + 0.002, (factor, sparse is None)
 
 
+def test_a_target_with_inward_faces_gets_the_map_of_the_target_as_it_is_and_a_warning(body):
+    """Reversed faces would swap left and right (orientation decides the chirality): the basis turns them outward,
+    says so, and both modes give the map of the target as it is, bit for bit."""
+    inward = np.ascontiguousarray(body["F"][:, ::-1])
+    with pytest.warns(UserWarning, match="faces point inward"):
+        B = _basis(body["Vp"], inward)
+    for sparse in (None, body["sparse"]):
+        as_is = _run(body, body["Vp"], body["F"], body["T"], sparse_target=sparse)
+        assert np.array_equal(_run(body, body["Vp"], inward, B, sparse_target=sparse), as_is)
+
+
 def test_in_units_of_scales_by_a_power_of_two_and_leaves_comparable_sizes_alone(body):
     from corr_core.correspondence.dense.basis import in_units_of, units_exponent
 
