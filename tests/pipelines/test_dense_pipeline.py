@@ -250,15 +250,14 @@ OWN_COARSE = ["dense_basis.k=60", "dense_basis.n_samples=1000", "dense_auto_init
 
 def test_own_meshes_in_one_command(data, first_run, tmp_path, dask_client):
     """pipelines/own_meshes.yaml: a template with its landmark file and a folder of meshes with nothing else
-    (here one pose, one decimated with shuffled ids, the pose in millimetres far from the origin, and the pose with
-    its faces pointing inward) -> dense maps and placed landmarks, near the truth."""
+    (here one pose, one decimated with shuffled ids, and the pose in millimetres far from the origin with its faces
+    pointing inward) -> dense maps and placed landmarks, near the truth."""
     folder = tmp_path / "mine"
     folder.mkdir()
     for sub, name in (("template", "mesh000"), ("test", "mesh001"), ("test", "mesh002")):
         shutil.copy(data["root"] / "meshes" / sub / f"{name}.obj", folder)
     V1, F1 = load_mesh(folder / "mesh001.obj")
-    save_obj(folder / "mesh001_mm.obj", V1 * 1000.0 + 5000.0, F1)
-    save_obj(folder / "mesh001_in.obj", V1, F1[:, ::-1])                     # every face pointing inward
+    save_obj(folder / "mesh001_mm_in.obj", V1 * 1000.0 + 5000.0, F1[:, ::-1])   # millimetres, faces inward
     sets = [f"data.root={folder}", "template=mesh000", f"landmarks={data['root'] / 'landmark_vids.txt'}",
             *OWN_COARSE]
     out = tmp_path / "out"
@@ -268,7 +267,7 @@ def test_own_meshes_in_one_command(data, first_run, tmp_path, dask_client):
     ids, names = read_landmarks(data["root"] / "landmark_vids.txt")
     truth = {"mesh001": np.arange(len(load_mesh(folder / "mesh000.obj")[0])),
              "mesh002": np.loadtxt(data["root"] / "ground_truth" / "mesh002.txt", dtype=np.int64)}
-    truth["mesh001_mm"] = truth["mesh001_in"] = truth["mesh001"]
+    truth["mesh001_mm_in"] = truth["mesh001"]
     for mesh, true_map in truth.items():
         placed, placed_names = read_landmarks(out / "placed_landmarks" / "dense_auto" / f"{mesh}.txt")
         assert placed_names == names
