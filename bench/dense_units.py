@@ -4,7 +4,8 @@ to their exact vertex (the course poses share the template's triangles: vertex i
 geodesic error / sqrt(area) at 500 farthest-point template vertices, and the share of vertices mapped as with
 factor 1; then the same for the target as it is with every face reversed (normals pointing inward).
 
-Run:  python bench/dense_units.py [--data ../shared/data/hw3/scape] [--pose mesh002] [--factors 1,1.2,1.41,2,1000,0.001,0.0254,39.37]
+Run:  python bench/dense_units.py [--data ../shared/data/hw3/scape] [--pose mesh002]
+          [--factors 1,1.2,1.41,2,1000,0.001,0.0254,39.37]
 """
 from __future__ import annotations
 

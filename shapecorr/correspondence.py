@@ -33,8 +33,9 @@ from .skips import skip_reasons, skipped, without_skipped
 @register("corr.mesh", group="correspondence", fanout="item")
 def mesh(path, *, item_name: str | None = None) -> dict:
     """Load, repair (vertex ids kept) and check one mesh for the intrinsic methods: faces turned outward when
-    they all point inward (``repair.orient_outward``), only the largest connected component is kept (its faces; the vertices of small loose pieces and those no face uses stay in V, with
-    their ids, and every method ignores them: ``corr_core.geometry.intrinsic.IntrinsicMesh``).
+    they all point inward (``repair.orient_outward``), only the largest connected component kept (its faces; the
+    vertices of small loose pieces and those no face uses stay in V, with their ids, and every method ignores
+    them: ``corr_core.geometry.intrinsic.IntrinsicMesh``).
 
     Returns {"V": (n,3) float64 all vertices in file order, "F": (m,3) int64 repaired faces of the largest
     component, "area": float (of F), "name": file name, "item": item name, "warnings": [str], "repairs": [dict]

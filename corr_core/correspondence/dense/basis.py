@@ -26,7 +26,7 @@ from corr_core.geometry import geodesic
 from corr_core.geometry.intrinsic import IntrinsicMesh
 from corr_core.geometry.laplacian import laplacian_and_mass, start_vector
 from corr_core.geometry.primitives import face_areas, face_normals, vertex_normals
-from corr_core.geometry.repair import OUTWARD_MARGIN, orient_outward
+from corr_core.geometry.repair import orient_outward
 from corr_core.geometry.sampling import farthest_point_samples
 
 
@@ -284,14 +284,15 @@ def mesh_basis(V: np.ndarray, F: np.ndarray, *, k: int = 100, n_samples: int = 2
     V, F = _check_mesh(V, F, name)
     mesh = IntrinsicMesh(V, F)
     V, F = mesh.V, mesh.F
-    F, ratio = orient_outward(V, F)
-    if ratio < -OUTWARD_MARGIN:
-        warnings.warn(f"{name}: its faces point inward (signed volume ratio {ratio:.2f}); the dense map uses them "
-                      "reversed (orientation tells left from right)", UserWarning, stacklevel=2)
     if not np.all(np.isfinite(V)):
         raise ValueError(f"{name}: vertex positions of the mesh's surface contain NaN or inf")
     if len(V) < 4:
         raise ValueError(f"{name}: the largest connected component has only {len(V)} vertices")
+    F_outward, ratio = orient_outward(V, F)
+    if F_outward is not F:
+        warnings.warn(f"{name}: its faces point inward (signed volume ratio {ratio:.2f}); the dense map uses them "
+                      "reversed (orientation tells left from right)", UserWarning, stacklevel=2)
+        F = F_outward
     V = V * 2.0 ** -size_exponent(V, F, name)          # exact: a mesh with sqrt(area) in [1, 2) is left as it is
     L, M = laplacian_and_mass(V, F)
     area = float(face_areas(V, F).sum())
