@@ -32,8 +32,9 @@ from .skips import skip_reasons, skipped, without_skipped
 
 @register("corr.mesh", group="correspondence", fanout="item")
 def mesh(path, *, item_name: str | None = None) -> dict:
-    """Load, repair (vertex ids kept) and check one mesh for the intrinsic methods: faces turned outward when
-    they all point inward (``repair.orient_outward``), only the largest connected component kept (its faces; the
+    """Load, repair (vertex ids kept) and check one mesh for the intrinsic methods: welded along its seams (the
+    faces re-pointed from a vertex's copies to the vertex, ``repair.coincident_representatives``), faces turned
+    outward when they all point inward (``repair.orient_outward``), only the largest connected component kept (its faces; the
     vertices of small loose pieces and those no face uses stay in V, with their ids, and every method ignores
     them: ``corr_core.geometry.intrinsic.IntrinsicMesh``).
 
@@ -45,7 +46,7 @@ def mesh(path, *, item_name: str | None = None) -> dict:
     """
     name = os.path.basename(path)
     V, F = load_mesh(path)
-    F, repairs = repair_mesh(V, F, name, keep_largest_component=True, outward=True)
+    F, repairs = repair_mesh(V, F, name, keep_largest_component=True, outward=True, weld=True)
     warn_repairs(repairs)
     warnings = meshcheck.check_correspondence_mesh(V, F, name=name, allow_unreferenced=True)
     return {"V": V, "F": F.astype(np.int64), "area": surface_area(V, F), "name": name, "item": item_name,

@@ -32,7 +32,7 @@ from corr_core.geometry.primitives import edge_keys, face_areas, half_edges, uni
 log = logging.getLogger(__name__)
 
 __all__ = ["RepairRecord", "repair_mesh", "load_repaired_mesh", "orient_faces", "warn_repairs", "repair_messages",
-           "compact_mesh"]
+           "compact_mesh", "coincident_representatives"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,6 +60,47 @@ def _bbox_diagonal2(V: np.ndarray, F: np.ndarray) -> float:
     """Squared bounding-box diagonal of the vertices that F: (m,3) uses (length^2)."""
     used = V[np.unique(F)]
     return float(np.sum((used.max(axis=0) - used.min(axis=0)) ** 2))
+
+
+def coincident_representatives(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """For every vertex, the lowest id among the vertices that F uses at exactly its position: (n,) int64.
+
+    A surface cut along a seam (a texture seam, parts exported separately, a triangle soup) repeats the seam's
+    vertices with new ids, so it falls apart into pieces or gains a boundary along the seam; ``F`` re-pointed
+    through this (``rep[F]``) is the welded surface, with every vertex id unchanged (the copies are then used by
+    no face). A vertex no face uses keeps its own id unless a used vertex sits at its position (then it is that
+    vertex's copy). Exact coordinates only: copies written by a tool carry the same numbers.
+
+    Args: V: (n,3) float; F: (m,3) int. Returns: rep (n,) int64, rep[i] <= i for used vertices, rep[rep] == rep.
+    """
+    V = np.asarray(V, dtype=np.float64)
+    n = len(V)
+    rep = np.arange(n, dtype=np.int64)
+    _, group = np.unique(V, axis=0, return_inverse=True)
+    group = group.ravel()
+    if group.max(initial=-1) + 1 == n:                                  # no two vertices share a position
+        return rep
+    used = np.zeros(n, dtype=bool)
+    used[np.asarray(F, dtype=np.int64).ravel()] = True
+    lowest_used = np.full(group.max() + 1, n, dtype=np.int64)
+    np.minimum.at(lowest_used, group[used], np.flatnonzero(used))
+    has_used = lowest_used[group] < n
+    rep[has_used] = lowest_used[group[has_used]]
+    return rep
+
+
+def _weld(V: np.ndarray, F: np.ndarray, name: str, records: list) -> np.ndarray:
+    """F (m,3) re-pointed to ``coincident_representatives``, with a record when anything was merged."""
+    rep = coincident_representatives(V, F)
+    used = np.unique(F)
+    merged = used[rep[used] != used]
+    if not len(merged):
+        return F
+    records.append(_record(name, "coincident_vertices", "merged", len(merged), "repair",
+                           f"{counted(len(merged), 'vertex', 'vertices')} at exactly the position of a lower-numbered "
+                           f"one merged into it (first: vertex {int(merged[0])} into {int(rep[merged[0]])}): the "
+                           "surface is welded along its seams; vertex ids unchanged, the copies are used by no face"))
+    return rep[F]
 
 
 def _drop_repeated_index(F: np.ndarray, file_ids: np.ndarray, name: str, records: list) -> np.ndarray:
@@ -281,11 +322,12 @@ def _report_boundary(F: np.ndarray, name: str, records: list) -> None:
 
 
 def repair_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", *, keep_largest_component: bool = False,
-                orient: bool = True, outward: bool = False, area_tol: float = 1e-12
+                orient: bool = True, outward: bool = False, weld: bool = False, area_tol: float = 1e-12
                 ) -> tuple[np.ndarray, list[RepairRecord]]:
     """Repair the faces of a mesh; vertices and their ids are never changed.
 
-    Steps, each reported when it finds something: drop faces repeating a vertex; drop duplicate faces (same
+    Steps, each reported when it finds something: weld seams (``weld``: faces re-pointed from a vertex to the
+    lowest-numbered used vertex at exactly its position, ``coincident_representatives``); drop faces repeating a vertex; drop duplicate faces (same
     three vertices in either orientation; the first is kept); drop zero-area faces; orient faces consistently
     (``orient``); report remaining non-manifold edges and the vertices no face uses; keep only the largest
     connected component by area (``keep_largest_component``, for intrinsic methods: the record counts the vertices
@@ -297,6 +339,8 @@ def repair_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", *, keep_larges
         orient: make the face orientation consistent.
         outward: after the components step, reverse every face of a surface that clearly faces inward
             (``orient_outward``; the correspondence meshes: orientation tells left from right).
+        weld: merge coincident vertices first (the correspondence meshes: a seam would cut the surface, and the
+            intrinsic methods would see a boundary or keep only one piece).
         area_tol: a face is zero-area when area <= area_tol * (bounding-box diagonal)^2.
     Returns:
         F2: (m2,3) int64 repaired faces (a subset of the rows of F, some with their vertex order reversed);
@@ -309,6 +353,9 @@ def repair_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", *, keep_larges
     check_mesh(V, F, name=name)
     records: list[RepairRecord] = []
     file_ids = np.arange(len(F))
+    faces_of_file = F
+    if weld:
+        F = _weld(V, F, name, records)
     for step in (_drop_repeated_index, _drop_duplicates, functools.partial(_drop_zero_area, V, area_tol=area_tol)):
         if len(F):
             keep = step(F, file_ids, name, records)
@@ -319,7 +366,7 @@ def repair_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", *, keep_larges
     if orient:
         F = _orient(F, name, records)
     _report_non_manifold(F, name, records)
-    _report_unreferenced(len(V), F, name, records)  # used by no face of the file (dropped pieces: see components)
+    _report_unreferenced(len(V), faces_of_file, name, records)  # by no face of the file (welded copies: see weld)
     F = _components(V, F, keep_largest_component, name, records)
     if outward:
         F = _outward(V, F, name, records)

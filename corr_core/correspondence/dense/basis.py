@@ -26,7 +26,7 @@ from corr_core.geometry import geodesic
 from corr_core.geometry.intrinsic import IntrinsicMesh
 from corr_core.geometry.laplacian import laplacian_and_mass, start_vector
 from corr_core.geometry.primitives import face_areas, face_normals, vertex_normals
-from corr_core.geometry.repair import orient_outward
+from corr_core.geometry.repair import coincident_representatives, orient_outward
 from corr_core.geometry.sampling import farthest_point_samples
 
 
@@ -45,6 +45,9 @@ class MeshBasis:
         samples: (s,) int farthest-point vertex samples (Euclidean, deterministic start).
         vids: (n,) int original vertex id of each local vertex (None: the identity, nothing was left out).
         n_full: vertex count of the original mesh (None: n).
+        aliases: (n_full,) int original id each original vertex stands for (None: itself): a copy of a vertex
+            at exactly its position (a seam, ``repair.coincident_representatives``) is its representative's alias,
+            takes its image in ``map_to_original`` and its local id in ``to_local``.
     """
 
     V: np.ndarray
@@ -56,6 +59,7 @@ class MeshBasis:
     samples: np.ndarray
     vids: np.ndarray | None = None
     n_full: int | None = None
+    aliases: np.ndarray | None = None
     _solver: object = field(default=None, repr=False, compare=False)
     _sample_distances: np.ndarray | None = field(default=None, repr=False, compare=False)
     _derived: dict = field(default_factory=dict, repr=False, compare=False)
@@ -127,7 +131,7 @@ class MeshBasis:
         f = float(factor)
         out = MeshBasis(V=self.V * f, F=self.F, evals=self.evals / (f * f), evecs=self.evecs / f,
                         mass=self.mass * (f * f), area=self.area * (f * f), samples=self.samples, vids=self.vids,
-                        n_full=self.n_full)
+                        n_full=self.n_full, aliases=self.aliases)
         out._sample_distances = self._sample_distances
         for key in ("vertex_normals", "extremities"):                  # unchanged by a scale
             if key in self._derived:
@@ -160,6 +164,10 @@ class MeshBasis:
         self.n_full = len(self.V) if self.n_full is None else int(self.n_full)
         if len(self.vids) != len(self.V) or (len(self.vids) and self.vids.max() >= self.n_full):
             raise ValueError(f"MeshBasis: vids must be ({len(self.V)},) ids below n_full={self.n_full}")
+        if self.aliases is not None:
+            self.aliases = np.asarray(self.aliases, dtype=np.int64)
+            if self.aliases.shape != (self.n_full,) or np.any(self.aliases[self.aliases] != self.aliases):
+                raise ValueError(f"MeshBasis: aliases must be ({self.n_full},) ids, each its own representative's")
 
     def to_local(self, vids, what: str = "vertex", names=None, source: str = "") -> np.ndarray:
         """Local ids (p,) int64 of original vertex ids (p,) int; a clear error (naming ``what``, ``names``,
@@ -171,7 +179,7 @@ class MeshBasis:
                              f"mesh's 0..{self.n_full - 1} vertices")
         local = np.full(self.n_full, -1, dtype=np.int64)
         local[self.vids] = np.arange(self.n)
-        out = local[vids]
+        out = local[vids if self.aliases is None else self.aliases[vids]]
         if (out < 0).any():
             i = int(np.flatnonzero(out < 0)[0])
             label = f"{what} {names[i]!r} (vertex {int(vids[i])})" if names is not None else f"{what} {int(vids[i])}"
@@ -191,6 +199,8 @@ class MeshBasis:
             out["sample_distances"] = np.asarray(self._sample_distances)
         if "extremities" in self._derived:
             out["extremities"] = np.asarray(self._derived["extremities"])
+        if self.aliases is not None:
+            out["aliases"] = np.asarray(self.aliases)
         return out
 
     @classmethod
@@ -202,7 +212,8 @@ class MeshBasis:
         d = {key: np.asarray(arrays[key]) for key in cls._ARRAY_KEYS}
         basis = cls(V=d["V"].astype(np.float64), F=d["F"].astype(np.int64), evals=d["evals"], evecs=d["evecs"],
                     mass=d["mass"], area=float(d["area"]), samples=d["samples"].astype(np.int64),
-                    vids=d["vids"], n_full=int(d["n_full"]))
+                    vids=d["vids"], n_full=int(d["n_full"]),
+                    aliases=np.asarray(arrays["aliases"]) if "aliases" in arrays else None)
         if "sample_distances" in arrays:
             basis._sample_distances = np.asarray(arrays["sample_distances"])
         if "extremities" in arrays:
@@ -282,6 +293,7 @@ def mesh_basis(V: np.ndarray, F: np.ndarray, *, k: int = 100, n_samples: int = 2
         MeshBasis of the largest connected component (module docstring: local and original ids).
     """
     V, F = _check_mesh(V, F, name)
+    F, aliases = _welded(V, F)
     mesh = IntrinsicMesh(V, F)
     V, F = mesh.V, mesh.F
     if not np.all(np.isfinite(V)):
@@ -301,7 +313,21 @@ def mesh_basis(V: np.ndarray, F: np.ndarray, *, k: int = 100, n_samples: int = 2
     start = int(np.argmax(np.linalg.norm(V - V.mean(axis=0), axis=1)))
     samples = farthest_point_samples(V, min(n_samples, len(V)), start=start)
     return MeshBasis(V=V, F=F, evals=evals, evecs=evecs, mass=mass, area=area, samples=samples, vids=mesh.vids,
-                     n_full=mesh.n_full)
+                     n_full=mesh.n_full, aliases=aliases)
+
+
+def _welded(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """The surface welded along its seams: (F (m',3) re-pointed to ``repair.coincident_representatives``, without
+    the faces that then repeat a vertex; aliases (n,) int or None when no two vertices share a position). A mesh
+    the pipelines already welded (``repair_mesh(weld=True)``: the copies used by no face) gets its aliases too."""
+    rep = coincident_representatives(V, F)
+    if np.array_equal(rep, np.arange(len(V))):
+        return F, None
+    F = rep[F]
+    F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 2] != F[:, 0])]
+    if not len(F):
+        raise ValueError("every face of the mesh joins vertices at one position: the surface has no area")
+    return F, rep
 
 
 def size_exponent(V: np.ndarray, F: np.ndarray, name: str = "mesh") -> int:
@@ -337,6 +363,33 @@ def in_units_of(target: MeshBasis, source: MeshBasis) -> MeshBasis:
     return target.cached(("in_units", k), lambda: target.scaled(2.0 ** k))
 
 
+SIZE_DEAD_ZONE = 1.0 / 32.0   # log2 of a length ratio: sizes within 2^(1/32) (2.2 % in length) count as equal
+
+
+def size_exponent_gap(source: MeshBasis, target: MeshBasis) -> float:
+    """log2 of the length ratio sqrt(source.area / target.area) minus its nearest integer (``units_exponent``):
+    how far the two sizes are apart once the units agree, in [-0.5, 0.5] (0.26 for a person 1.2 times taller)."""
+    e = 0.5 * np.log2(source.area / target.area)
+    return float(e - np.round(e))
+
+
+def in_size_of(target: MeshBasis, source: MeshBasis) -> MeshBasis:
+    """``target`` scaled to the size of ``source``: lengths times sqrt(source.area / target.area), so it has the
+    template's area; ``in_units_of`` (a power of two, exact) when the sizes agree within ``SIZE_DEAD_ZONE`` once
+    the units agree. Made once and cached on ``target``.
+
+    The refinement compares positions (rigid patch fits, the ARAP registration) and the functional map
+    eigenvalues, so a person 1.2 or 1.4 times the template's height gets a worse map in its own size than at the
+    template's (``python bench/dense_units.py --factors 1,1.2,1.41,0.78``, docs/dense.md "Units"). Every
+    measure of a map is per sqrt(area), so the scale changes nothing else. The dead zone keeps the maps of
+    meshes of one subject in several poses (area within 4 % of the template's) bit for bit as they were.
+    """
+    if abs(size_exponent_gap(source, target)) <= SIZE_DEAD_ZONE:
+        return in_units_of(target, source)
+    factor = float(np.sqrt(source.area / target.area))
+    return target.cached(("in_size", factor), lambda: target.scaled(factor))
+
+
 def map_to_original(source: MeshBasis, target: MeshBasis, p2p: np.ndarray) -> np.ndarray:
     """A point map in local ids (n_s,) int -> in original ids (source.n_full,) int64: entry i is the original
     target vertex id of original template vertex i, -1 for template vertices off the template's kept component."""
@@ -345,7 +398,7 @@ def map_to_original(source: MeshBasis, target: MeshBasis, p2p: np.ndarray) -> np
         raise ValueError(f"point map has shape {p2p.shape}, the template basis {source.n} vertices")
     out = np.full(source.n_full, -1, dtype=np.int64)
     out[source.vids] = target.vids[p2p]
-    return out
+    return out if source.aliases is None else out[source.aliases]
 
 
 def map_to_local(source: MeshBasis, target: MeshBasis, vertex_map: np.ndarray) -> np.ndarray:

@@ -33,7 +33,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from corr_core.correspondence.dense import fmaps, zoomout
-from corr_core.correspondence.dense.basis import MeshBasis, in_units_of
+from corr_core.correspondence.dense.basis import MeshBasis, in_size_of
 from corr_core.geometry.primitives import vertex_adjacency
 
 LOCAL_SCALES = (0.1, 0.2, 0.4)       # widths of exp(-(d/s)^2), units sqrt(area)
@@ -87,6 +87,7 @@ def fmap_from_points(source: MeshBasis, target: MeshBasis, points_source: np.nda
     """
     if len(points_source) != len(points_target):
         raise ValueError(f"{len(points_source)} template points but {len(points_target)} target points")
+    target = in_size_of(target, source)                 # at the template's size (basis.in_size_of)
     FS, FT = features if features is not None else (point_features(source, points_source),
                                                     point_features(target, points_target))
     k = int(min(k, source.evecs.shape[1], target.evecs.shape[1]))
@@ -94,8 +95,7 @@ def fmap_from_points(source: MeshBasis, target: MeshBasis, points_source: np.nda
     Om_S = Om_T = None
     if w_orient > 0:
         Om_S, Om_T = fmaps.orientation_operators(source, FS, k), fmaps.orientation_operators(target, FT, k)
-    evals_T = in_units_of(target, source).evals         # the Laplacian term compares eigenvalues: same units
-    return fmaps.fit_functional_map(A_S, A_T, source.evals, evals_T, Om_S, Om_T, w_lap=w_lap, w_orient=w_orient)
+    return fmaps.fit_functional_map(A_S, A_T, source.evals, target.evals, Om_S, Om_T, w_lap=w_lap, w_orient=w_orient)
 
 
 def map_from_points(source: MeshBasis, target: MeshBasis, points_source, points_target, *, k_init: int = 40,
@@ -110,6 +110,7 @@ def map_from_points(source: MeshBasis, target: MeshBasis, points_source, points_
     Returns: C: (k_end, k_end) functional map, p2p_samples: (len(source.samples),) int target vertex of each
     template sample.
     """
+    target = in_size_of(target, source)                 # at the template's size (basis.in_size_of)
     points_source = source.to_local(points_source, what="template point")
     points_target = target.to_local(points_target, what="target point")
     C = fmap_from_points(source, target, points_source, points_target, k=k_init, features=features)
@@ -247,6 +248,7 @@ def hks_disagreement(source: MeshBasis, target: MeshBasis, p2p_samples: np.ndarr
     (the 180-degree turn swapping left/right *and* front/back preserves orientation)."""
     from corr_core.correspondence import descriptors as desc
 
+    target = in_size_of(target, source)                 # at the template's size (basis.in_size_of)
     times = desc.hks_times(source.evals, n_times=n_times)
     hs = desc.hks(source.evals, source.evecs[source.samples], times=times)
     ht = desc.hks(target.evals, target.evecs[p2p_samples], times=times)
@@ -379,6 +381,7 @@ def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int | None = N
     """
     if n is not None and int(n) < 1:
         raise ValueError(f"automatic_hypotheses: n must be >= 1 (or None: decided here), got {n}")
+    target = in_size_of(target, source)                 # at the template's size (basis.in_size_of)
     Ps = (cached_extremities(source) if points_source is None
           else source.to_local(points_source, what="template point"))
     Pt = extremities(target) if points_target is None else target.to_local(points_target, what="target point")

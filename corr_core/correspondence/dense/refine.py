@@ -35,7 +35,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
-from corr_core.correspondence.dense.basis import MeshBasis, in_units_of, map_to_local
+from corr_core.correspondence.dense.basis import MeshBasis, in_size_of, map_to_local
 from corr_core.correspondence.dense.deform import refine_deform, refine_settle
 from corr_core.correspondence.dense.fmaps import fmap_from_p2p
 from corr_core.correspondence.dense.nearest import PointTree, nearest_compatible, vertex_neighbourhoods
@@ -101,6 +101,7 @@ def upsample_spectral(source: MeshBasis, target: MeshBasis, C: np.ndarray, p2p_s
         n_candidates: neighbourhood size on the target.
     Returns: (n_s,) int target vertex ids.
     """
+    target = in_size_of(target, source)                 # at the template's size (basis.in_size_of)
     samples = source.samples[:len(p2p_samples)]
     _, nearest_sample = cKDTree(source.V[samples]).query(source.V)
     start = np.asarray(p2p_samples)[nearest_sample]
@@ -320,8 +321,8 @@ class RefineStep:
     def run(self, source: MeshBasis, target: MeshBasis, p2p: np.ndarray) -> np.ndarray:
         """This step applied to ``p2p`` (n_s,) int local ids: the refined (n_s,) int map (``p2p`` itself when the
         step is ``only_if_lower`` and does not lower the distortion). The step sees the target in the template's
-        units (``basis.in_units_of``: its positions are compared with the template's)."""
-        refined = REFINE_STEPS[self.name](source, in_units_of(target, source), p2p, **self.options)
+        size (``basis.in_size_of``: its positions are compared with the template's)."""
+        refined = REFINE_STEPS[self.name](source, in_size_of(target, source), p2p, **self.options)
         if self.only_if_lower and not map_distortion(source, target, refined) < map_distortion(source, target, p2p):
             return p2p
         return refined

@@ -157,6 +157,37 @@ def test_keep_largest_component_keeps_vertex_ids():
     assert _kinds(records)["components"]["level"] == "note"
 
 
+def test_weld_merges_the_copies_of_a_seam_into_one_surface_and_keeps_vertex_ids(tmp_path):
+    """A sphere cut along its equator (the upper faces get their own copies of the equator's vertices, appended):
+    two pieces with a boundary each. ``weld`` re-points the faces to the originals (the file's faces back, the
+    copies used by no face), so the correspondence stage keeps the whole sphere, not the larger half."""
+    from corr_core.geometry.repair import coincident_representatives
+    from shapecorr.correspondence import mesh
+
+    V, F = sphere(300)
+    upper = V[F].mean(axis=1)[:, 2] > 0
+    seam = np.intersect1d(np.unique(F[upper]), np.unique(F[~upper]))
+    renumber = np.arange(len(V))
+    renumber[seam] = len(V) + np.arange(len(seam))
+    F_cut = F.copy()
+    F_cut[upper] = renumber[F[upper]]
+    V_cut = np.vstack([V, V[seam]])
+    rep = coincident_representatives(V_cut, F_cut)
+    np.testing.assert_array_equal(rep[len(V):], seam)
+    np.testing.assert_array_equal(rep[:len(V)], np.arange(len(V)))
+    welded, records = repair_mesh(V_cut, F_cut, "cut.obj", weld=True)
+    np.testing.assert_array_equal(welded, F)
+    kinds = _kinds(records)
+    assert kinds["coincident_vertices"]["count"] == len(seam) and "boundary" not in kinds
+    assert "unreferenced_vertices" not in kinds                       # the file's faces used every vertex
+    _, records = repair_mesh(V_cut, F_cut, "cut.obj")
+    assert "coincident_vertices" not in _kinds(records) and "boundary" in _kinds(records)
+    save_obj(tmp_path / "mesh001.obj", V_cut, F_cut)
+    out = mesh(str(tmp_path / "mesh001.obj"))
+    np.testing.assert_array_equal(out["F"], F)
+    assert out["area"] == pytest.approx(4 * np.pi, rel=0.02)
+
+
 def test_boundary_loops_are_reported():
     V, F = sphere(400)
     ring = np.flatnonzero(V[F].mean(1)[:, 2] > 0.9)  # cut a cap: one hole
