@@ -293,7 +293,7 @@ def mesh_basis(V: np.ndarray, F: np.ndarray, *, k: int = 100, n_samples: int = 2
         MeshBasis of the largest connected component (module docstring: local and original ids).
     """
     V, F = _check_mesh(V, F, name)
-    F, aliases = _welded(V, F)
+    F, aliases = _welded(V, F, name)
     mesh = IntrinsicMesh(V, F)
     V, F = mesh.V, mesh.F
     if not np.all(np.isfinite(V)):
@@ -316,7 +316,7 @@ def mesh_basis(V: np.ndarray, F: np.ndarray, *, k: int = 100, n_samples: int = 2
                      n_full=mesh.n_full, aliases=aliases)
 
 
-def _welded(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+def _welded(V: np.ndarray, F: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray | None]:
     """The surface welded along its seams: (F (m',3) re-pointed to ``repair.coincident_representatives``, without
     the faces that then repeat a vertex; aliases (n,) int or None when no two vertices share a position). A mesh
     the pipelines already welded (``repair_mesh(weld=True)``: the copies used by no face) gets its aliases too."""
@@ -326,7 +326,7 @@ def _welded(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray | None
     F = rep[F]
     F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 2] != F[:, 0])]
     if not len(F):
-        raise ValueError("every face of the mesh joins vertices at one position: the surface has no area")
+        raise ValueError(f"{name}: every face joins vertices at one position: the surface has no area")
     return F, rep
 
 
@@ -378,9 +378,10 @@ def in_size_of(target: MeshBasis, source: MeshBasis) -> MeshBasis:
     template's area; ``in_units_of`` (a power of two, exact) when the sizes agree within ``SIZE_DEAD_ZONE`` once
     the units agree. Made once and cached on ``target``.
 
-    The refinement compares positions (rigid patch fits, the ARAP registration) and the functional map
-    eigenvalues, so a person 1.2 or 1.4 times the template's height gets a worse map in its own size than at the
-    template's (``python bench/dense_units.py --factors 1,1.2,1.41,0.78``, docs/dense.md "Units"). Every
+    The dense map compares the two meshes' eigenvalues, spectral embeddings and positions (functional maps,
+    ZoomOut, rigid patch fits, the ARAP registration), so a person 1.2 or 1.4 times the template's height got a
+    worse map in its own size than at the template's (``python bench/dense_units.py``, docs/dense.md "Units and
+    size"). Every
     measure of a map is per sqrt(area), so the scale changes nothing else. The dead zone keeps the maps of
     meshes of one subject in several poses (area within 4 % of the template's) bit for bit as they were.
     """

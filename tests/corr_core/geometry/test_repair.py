@@ -10,7 +10,7 @@ import pytest
 from corr_core.generate.chairs import canonical_chair
 from corr_core.geometry.mesh_io import MeshError, save_obj
 from corr_core.geometry.repair import RepairRecord, load_repaired_mesh, orient_faces, repair_mesh
-from tests.helpers import logged, sphere
+from tests.helpers import cut_along_a_seam, logged, sphere
 
 
 TET_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
@@ -165,13 +165,7 @@ def test_weld_merges_the_copies_of_a_seam_into_one_surface_and_keeps_vertex_ids(
     from shapecorr.correspondence import mesh
 
     V, F = sphere(300)
-    upper = V[F].mean(axis=1)[:, 2] > 0
-    seam = np.intersect1d(np.unique(F[upper]), np.unique(F[~upper]))
-    renumber = np.arange(len(V))
-    renumber[seam] = len(V) + np.arange(len(seam))
-    F_cut = F.copy()
-    F_cut[upper] = renumber[F[upper]]
-    V_cut = np.vstack([V, V[seam]])
+    V_cut, F_cut, seam, _ = cut_along_a_seam(V, F, V[F].mean(axis=1)[:, 2] > 0)
     rep = coincident_representatives(V_cut, F_cut)
     np.testing.assert_array_equal(rep[len(V):], seam)
     np.testing.assert_array_equal(rep[:len(V)], np.arange(len(V)))
