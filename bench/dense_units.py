@@ -4,7 +4,7 @@ to their exact vertex (the course poses share the template's triangles: vertex i
 geodesic error / sqrt(area) at 500 farthest-point template vertices, and the share of vertices mapped as with
 factor 1; then the same for the target as it is with every face reversed (normals pointing inward), and cut
 along a seam (a front and a back piece, the seam's vertices repeated with new ids; a copy counts as its
-original).
+original), and with fins (``corr_core.generate.defects``).
 
 Run:  python bench/dense_units.py [--data ../shared/data/hw3/scape] [--pose mesh002]
           [--factors 1,1.2,1.41,0.78,2,1000,0.001,0.0254,39.37]
@@ -26,6 +26,7 @@ import numpy as np  # noqa: E402
 
 DEFAULT_DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "..", "shared", "data",
                             "hw3", "scape")
+N_FINS, FIN_HEIGHT = 30, 2.0   # fins on the target in the last line, their height in mean edge lengths
 OFFSET = 5000.0   # added to every coordinate of the scaled target (units of the scaled mesh)
 
 
@@ -37,6 +38,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from corr_core.correspondence.dense import dense_map, measures
+    from corr_core.generate.defects import cut_along_a_seam, with_fins
     from corr_core.geometry.mesh_io import load_mesh
     from corr_core.geometry.sampling import farthest_point_samples
 
@@ -64,28 +66,25 @@ def main(argv=None) -> int:
     err = measures.dense_errors(Vt, inward, {"m": p2p}, truth, vertices=vertices)["m"].mean()
     print(f"  as it is, every face reversed (pointing inward): exact vertex {np.mean(p2p == truth):.3f}  "
           f"mean error {err:.4f}  same as the first factor's map {np.mean(p2p == first):.3f}", flush=True)
-    V_cut, F_cut, shared = cut_along_a_seam(Vt, Ft)
+    centroid_z = Vt[Ft].mean(axis=1)[:, 2]
+    V_cut, F_cut, shared, _ = cut_along_a_seam(Vt, Ft, centroid_z > np.median(centroid_z))   # front and back
     p2p = dense_map(Vs, Fs, V_cut, F_cut)
     on_original = np.where(p2p >= len(Vt), shared[np.clip(p2p - len(Vt), 0, len(shared) - 1)], p2p)
     err = measures.dense_errors(Vt, Ft, {"m": on_original}, truth, vertices=vertices)["m"].mean()
     print(f"  as it is, cut along a seam ({len(shared)} vertices repeated): exact vertex "
           f"{np.mean(on_original == truth):.3f}  mean error {err:.4f}  same as the first factor's map "
           f"{np.mean(on_original == first):.3f}", flush=True)
+    V_fins, F_fins = with_fins(Vt, Ft, N_FINS, height=FIN_HEIGHT)
+    p2p = dense_map(Vs, Fs, V_fins, F_fins)
+    on_apex = p2p >= len(Vt)
+    fin_base = F_fins[len(Ft):, 0]                                   # apex n + i stands on vertex fin_base[i]
+    on_surface = np.where(on_apex, fin_base[np.clip(p2p - len(Vt), 0, N_FINS - 1)], p2p)
+    err = measures.dense_errors(Vt, Ft, {"m": on_surface}, truth, vertices=vertices)["m"].mean()
+    print(f"  as it is, with {N_FINS} fins (triangles {FIN_HEIGHT:g} edges tall standing on edges, non-manifold): "
+          f"exact vertex "
+          f"{np.mean(p2p == truth):.3f}  mean error {err:.4f} (an apex counted at its fin's base vertex)  "
+          f"on an apex {int(on_apex.sum())}  same as the first factor's map {np.mean(p2p == first):.3f}", flush=True)
     return 0
-
-
-def cut_along_a_seam(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """V (n,3), F (m,3) with the faces whose centroid z is above the median given their own copies (appended,
-    ids n..) of the vertices they share with the others: a front and a back piece, as texture exports write a
-    seam. Returns (V2 (n+s,3), F2 (m,3), shared (s,) the original ids of the copied vertices)."""
-    centroid_z = V[F].mean(axis=1)[:, 2]
-    front = centroid_z > np.median(centroid_z)
-    shared = np.intersect1d(np.unique(F[front]), np.unique(F[~front]))
-    renumber = np.arange(len(V))
-    renumber[shared] = len(V) + np.arange(len(shared))
-    F2 = F.copy()
-    F2[front] = renumber[F[front]]
-    return np.vstack([V, V[shared]]), F2, shared
 
 
 if __name__ == "__main__":

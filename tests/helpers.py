@@ -208,21 +208,6 @@ class ExternalCluster:
             p.wait(timeout=30)
 
 
-def cut_along_a_seam(V, F, side):
-    """V (n,3), F (m,3) with the faces of ``side`` ((m,) bool) given their own copies of the vertices they share
-    with the other faces, appended after the others (a seam as texture exports write it). Returns (V2 (n+s,3),
-    F2 (m,3), shared (s,) original ids of the seam vertices, copies (s,) their new ids n..n+s-1)."""
-    import numpy as np
-
-    shared = np.intersect1d(np.unique(F[side]), np.unique(F[~side]))
-    copies = len(V) + np.arange(len(shared))
-    renumber = np.arange(len(V))
-    renumber[shared] = copies
-    F2 = F.copy()
-    F2[side] = renumber[F[side]]
-    return np.vstack([V, V[shared]]), F2, shared, copies
-
-
 def sphere(n=1500, seed=0):
     """Unit sphere: Fibonacci points + convex hull, faces oriented outward. V: (n,3), F: (m,3)."""
     import numpy as np

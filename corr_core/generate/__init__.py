@@ -4,6 +4,8 @@
   (problem 1, joint alignment), with ``ground_truth.csv``.
 - ``humanoid``: an articulated, left/right symmetric humanoid surface mesh in several poses with identical
   connectivity and named landmarks, in the course's SCAPE layout (problem 2, landmark correspondence).
+- ``defects``: defects of published meshes made on purpose (a seam cut, fins on non-manifold edges) for the tests
+  and benchmarks of the repair and the dense maps.
 
 See docs/generated_data.md for the conventions.
 """

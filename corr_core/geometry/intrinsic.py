@@ -6,6 +6,8 @@ geodesic solver) and a loose piece is a second surface. ``IntrinsicMesh`` keeps 
 ``primitives.largest_component``) compacted to local ids ``0..k-1``, and maps between those and the original
 vertex ids, so every result is expressed in the *original* ids (ground truth "vertex i <-> vertex i" and
 landmark files keep their meaning): ``to_sub`` before computing, ``to_full`` / ``vids[...]`` after.
+Faces hanging on a non-manifold edge (a fin standing on the surface: ``primitives.without_fins``) are left out
+too, and with them the vertices only they use.
 
 On a clean mesh (one component, every vertex used) it is the identity: ``V`` and ``F`` are the given arrays
 and the results are bit-identical to computing on the mesh directly.
@@ -14,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from corr_core.geometry.primitives import largest_component, vertex_components
+from corr_core.geometry.primitives import largest_component, vertex_components, without_fins
 
 __all__ = ["IntrinsicMesh", "OutsideComponentError"]
 
@@ -30,19 +32,20 @@ class IntrinsicMesh:
         vids: (k,) int64 original ids of the kept vertices, increasing.
         V: (k,3) float64 their positions (= V_full[vids]); F: (m',3) int64 the component's faces in local ids.
         n_full: number of vertices of the original mesh.
-        is_identity: True when nothing is left out (then V, F are the original arrays).
+        is_identity: True when nothing is left out, no vertex and no face (then V, F are the original arrays).
     """
 
     def __init__(self, V: np.ndarray, F: np.ndarray):
         V = np.asarray(V, dtype=np.float64)
         F = np.asarray(F, dtype=np.int64)
         self.n_full = len(V)
-        used = np.unique(F)
-        if len(used) == len(V) and _connected(len(V), F):
+        F_kept = without_fins(V, F)                  # a face hanging on a non-manifold edge is not surface
+        used = np.unique(F_kept)
+        if F_kept is F and len(used) == len(V) and _connected(len(V), F):
             self.V, self.F, self.vids = V, F, np.arange(len(V), dtype=np.int64)
             self.is_identity = True
         else:
-            self.V, self.F, kept = largest_component(V, F)
+            self.V, self.F, kept = largest_component(V, F_kept)
             self.vids = np.asarray(kept, dtype=np.int64)
             self.is_identity = False
         self._local = np.full(self.n_full, -1, dtype=np.int64)

@@ -12,7 +12,7 @@ from scipy.sparse.csgraph import connected_components
 __all__ = [
     "face_cross", "face_areas", "face_normals", "vertex_normals", "surface_area", "surface_centroid",
     "half_edges", "edge_keys", "unique_edges", "mesh_edges", "vertex_adjacency", "vertex_components",
-    "largest_component", "same_triangles", "rotation_about_y", "rotate_about_y",
+    "largest_component", "manifold_patches", "without_fins", "same_triangles", "rotation_about_y", "rotate_about_y",
 ]
 
 
@@ -137,6 +137,36 @@ def largest_component(V: np.ndarray, F: np.ndarray, by: str = "area") -> tuple[n
     remap = np.full(len(V), -1, dtype=np.int64)
     remap[kept] = np.arange(len(kept))
     return V[kept], remap[F_keep], kept
+
+
+def manifold_patches(F: np.ndarray) -> tuple[int, np.ndarray]:
+    """Faces joined only across edges that exactly two faces share: (count, labels (m,) int, one per face).
+
+    On an edge-manifold mesh the patches are its connected components. A fin (faces hanging on an edge that
+    three or more faces share, e.g. a stray triangle standing on a surface) is cut off there and becomes a patch
+    of its own; so does anything attached to the rest only along such edges.
+    """
+    F = np.asarray(F, dtype=np.int64)
+    _, edge_of_half, counts = np.unique(edge_keys(half_edges(F)), return_inverse=True, return_counts=True)
+    face_of_half = np.repeat(np.arange(len(F)), 3)
+    manifold = counts[edge_of_half] == 2
+    order = np.argsort(edge_of_half[manifold], kind="stable")      # the two half-edges of each manifold edge
+    pairs = face_of_half[manifold][order].reshape(-1, 2)
+    A = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(F), len(F)))
+    return connected_components(A, directed=False)
+
+
+def without_fins(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """The faces of the largest ``manifold_patches`` patch by area (ties: the lowest label), or F itself (the same
+    object) when no edge has more than two faces. V: (n,3) float; F: (m,3) int. Returns (m2,3) int, rows of F."""
+    n_patches, labels = manifold_patches(F)
+    if n_patches < 2:
+        return F
+    _, counts = unique_edges(F)
+    if not (counts > 2).any():
+        return F
+    area = np.bincount(labels, weights=face_areas(V, F), minlength=n_patches)
+    return F[labels == int(np.argmax(area))]
 
 
 def _canonical_triangles(F: np.ndarray) -> np.ndarray:

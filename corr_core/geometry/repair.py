@@ -1,7 +1,8 @@
 """Repair a triangle mesh on load without ever renumbering its vertices.
 
 Published scans carry duplicated faces (also in the opposite orientation), faces repeating a vertex, zero-area
-faces, unreferenced vertices, inconsistent face orientation, stray pieces and holes. ``repair_mesh`` fixes what
+faces, unreferenced vertices, inconsistent face orientation, fins on non-manifold edges, stray pieces and holes.
+``repair_mesh`` fixes what
 can be fixed by changing only the *faces*: vertex ``i`` stays vertex ``i``, so ground truth such as "vertex i
 matches vertex i" and landmark vertex ids survive. Vertices that no face uses afterwards are simply ignored
 (``normalize_mesh`` and the renderer use referenced vertices only).
@@ -27,7 +28,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from corr_core.geometry.mesh_io import MeshError, check_mesh, counted, load_mesh
-from corr_core.geometry.primitives import edge_keys, face_areas, half_edges, unique_edges, vertex_components
+from corr_core.geometry.primitives import (edge_keys, face_areas, half_edges, unique_edges, vertex_components,
+                                           without_fins)
 
 log = logging.getLogger(__name__)
 
@@ -273,6 +275,21 @@ def _report_non_manifold(F: np.ndarray, name: str, records: list) -> None:
                                f"(first: ({int(first[0])}, {int(first[1])}))"))
 
 
+def _drop_fins(V: np.ndarray, F: np.ndarray, name: str, records: list) -> np.ndarray:
+    """Keep the largest patch joined across edges two faces share (``primitives.without_fins``): faces hanging on a
+    non-manifold edge (fins) are dropped and reported."""
+    F_kept = without_fins(V, F)
+    if F_kept is F:
+        return F
+    n_dropped = len(F) - len(F_kept)
+    share = 1.0 - face_areas(V, F_kept).sum() / face_areas(V, F).sum()
+    records.append(_record(name, "non_manifold_pieces", "dropped", n_dropped, "repair",
+                           f"dropped {counted(n_dropped, 'face')} joined to the surface only along non-manifold edges "
+                           f"(fins: {share:.2%} of the area; vertex ids unchanged, the vertices only they used are "
+                           "ignored)"))
+    return F_kept
+
+
 def _components(V: np.ndarray, F: np.ndarray, keep_largest: bool, name: str, records: list) -> np.ndarray:
     _, labels = vertex_components(len(V), F)
     face_label = labels[F[:, 0]]
@@ -329,13 +346,15 @@ def repair_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", *, keep_larges
     Steps, each reported when it finds something: weld seams (``weld``: faces re-pointed from a vertex to the
     lowest-numbered used vertex at exactly its position, ``coincident_representatives``); drop faces repeating a vertex; drop duplicate faces (same
     three vertices in either orientation; the first is kept); drop zero-area faces; orient faces consistently
-    (``orient``); report remaining non-manifold edges and the vertices no face uses; keep only the largest
-    connected component by area (``keep_largest_component``, for intrinsic methods: the record counts the vertices
-    of the pieces left out) or report the components; report boundary loops.
+    (``orient``); with ``keep_largest_component``, drop the faces joined to the surface only along non-manifold
+    edges (fins, ``primitives.without_fins``); report remaining non-manifold edges and the vertices no face uses;
+    keep only the largest connected component by area (``keep_largest_component``, for intrinsic methods: the
+    record counts the vertices of the pieces left out) or report the components; report boundary loops.
 
     Args:
         V: (n,3) float vertex positions; F: (m,3) int faces; name: the file, for messages.
-        keep_largest_component: drop every face outside the largest component (its vertices become unreferenced).
+        keep_largest_component: drop every face outside the largest component and every fin (their vertices become
+            unreferenced).
         orient: make the face orientation consistent.
         outward: after the components step, reverse every face of a surface that clearly faces inward
             (``orient_outward``; the correspondence meshes: orientation tells left from right).
@@ -365,6 +384,8 @@ def repair_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", *, keep_larges
                         "the file has no usable surface (export it again as a triangle mesh)")
     if orient:
         F = _orient(F, name, records)
+    if keep_largest_component:
+        F = _drop_fins(V, F, name, records)
     _report_non_manifold(F, name, records)
     _report_unreferenced(len(V), faces_of_file, name, records)  # by no face of the file (welded copies: see weld)
     F = _components(V, F, keep_largest_component, name, records)

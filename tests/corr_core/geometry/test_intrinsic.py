@@ -7,6 +7,7 @@ import pytest
 from corr_core.correspondence import mesh_features
 from corr_core.geometry.geodesic import GeodesicSolver
 from corr_core.geometry.intrinsic import IntrinsicMesh, OutsideComponentError
+from corr_core.generate.defects import with_fins
 from tests.helpers import sphere
 
 LANDMARKS = np.array([0, 40, 120, 250, 399])
@@ -72,6 +73,19 @@ def test_geodesics_are_the_clean_ones_in_original_ids(meshes):
     np.testing.assert_array_equal(D[:, new_id], clean.distances(LANDMARKS))
     assert np.isnan(np.delete(D, new_id, axis=1)).all()
     assert dirty.diameter() == clean.diameter()
+
+
+def test_fins_are_left_out_and_geodesics_are_the_clean_ones(meshes):
+    """Triangles standing on edges (non-manifold) are not surface: their apexes are off the kept mesh, and the
+    geodesics are those of the mesh without them."""
+    (V, F), _ = meshes
+    V2, F2 = with_fins(V, F, 6)
+    surface = IntrinsicMesh(V2, F2)
+    assert not surface.is_identity and len(surface.vids) == len(V)
+    np.testing.assert_array_equal(surface.F, F)
+    assert not surface.contains(np.arange(len(V), len(V2))).any()
+    np.testing.assert_array_equal(GeodesicSolver(V2, F2).distances(LANDMARKS)[:, :len(V)],
+                                  GeodesicSolver(V, F).distances(LANDMARKS))
 
 
 def test_features_are_the_clean_ones(meshes):

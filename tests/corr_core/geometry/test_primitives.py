@@ -2,10 +2,12 @@
 import numpy as np
 import pytest
 
-from corr_core.geometry.primitives import (edge_keys, face_areas, face_normals, largest_component, mesh_edges,
+from corr_core.geometry.primitives import (edge_keys, face_areas, face_normals, largest_component, manifold_patches,
+                                           mesh_edges, without_fins,
                                            rotate_about_y, rotation_about_y, same_triangles, surface_area,
                                            surface_centroid, unique_edges, vertex_adjacency, vertex_components,
                                            vertex_normals)
+from corr_core.generate.defects import with_fins
 from tests.helpers import sphere
 
 TETRA_V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
@@ -92,6 +94,21 @@ def test_components_and_largest_by_area_or_vertices():
     assert F3.min() == 0 and F3.max() == 6
     with pytest.raises(ValueError, match="by must be"):
         largest_component(V, F, by="faces")
+
+
+def test_fins_are_patches_of_their_own_and_without_fins_keeps_the_surface():
+    V, F = sphere(200)
+    n, labels = manifold_patches(F)
+    assert n == 1 and not labels.any()
+    assert without_fins(V, F) is F                                  # no non-manifold edge: the same array
+    V2, F2 = with_fins(V, F, 3)
+    n, labels = manifold_patches(F2)
+    assert n == 4 and len(np.unique(labels[len(F):])) == 3 and (labels[:len(F)] == labels[0]).all()
+    assert labels[0] not in labels[len(F):]
+    np.testing.assert_array_equal(without_fins(V2, F2), F)
+    V3 = np.vstack([V, V + [3.0, 0, 0]])                              # two spheres, no fin: both kept
+    F3 = np.vstack([F, F + len(V)])
+    assert manifold_patches(F3)[0] == 2 and without_fins(V3, F3) is F3
 
 
 def test_vertex_adjacency_is_symmetric_binary():

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from corr_core.generate.chairs import canonical_chair
+from corr_core.generate.defects import cut_along_a_seam, with_fins
 from corr_core.geometry.mesh_io import MeshError, save_obj
 from corr_core.geometry.repair import RepairRecord, load_repaired_mesh, orient_faces, repair_mesh
-from tests.helpers import cut_along_a_seam, logged, sphere
+from tests.helpers import logged, sphere
 
 
 TET_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
@@ -196,6 +197,26 @@ def test_non_manifold_fin_is_reported_not_rejected():
     F2, records = repair_mesh(V, F, "fin.obj")
     assert len(F2) == 5
     assert _kinds(records)["non_manifold_edges"]["level"] == "warning"
+
+
+def test_fins_are_dropped_from_the_correspondence_mesh_and_reported(tmp_path):
+    """Triangles standing on edges of a sphere (each edge then has three faces): kept and warned about by default,
+    dropped with a repair record when the largest component is kept (the intrinsic methods' mesh)."""
+    from shapecorr.correspondence import mesh
+
+    V, F = sphere(300)
+    V2, F2 = with_fins(V, F, 5)
+    kept, records = repair_mesh(V2, F2, "fins.obj", keep_largest_component=True)
+    np.testing.assert_array_equal(kept, F)
+    kinds = _kinds(records)
+    assert kinds["non_manifold_pieces"]["count"] == 5 and kinds["non_manifold_pieces"]["level"] == "repair"
+    assert "fins.obj: dropped 5 faces joined to the surface only along non-manifold edges" in \
+        kinds["non_manifold_pieces"]["message"]
+    assert "non_manifold_edges" not in kinds
+    same, records = repair_mesh(V2, F2, "fins.obj")
+    assert len(same) == len(F2) and "non_manifold_pieces" not in _kinds(records)
+    save_obj(tmp_path / "mesh001.obj", V2, F2)
+    np.testing.assert_array_equal(mesh(str(tmp_path / "mesh001.obj"))["F"], F)
 
 
 @pytest.mark.parametrize("V, F, message", [
