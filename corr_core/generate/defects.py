@@ -27,7 +27,7 @@ def cut_along_a_seam(V: np.ndarray, F: np.ndarray, side: np.ndarray
     return np.vstack([V, V[shared]]), F2, shared, copies
 
 
-def with_fins(V: np.ndarray, F: np.ndarray, n_fins: int, seed: int = 0, height: float = 0.5
+def with_fins(V: np.ndarray, F: np.ndarray, n_fins: int, *, seed: int = 0, height: float = 0.5
               ) -> tuple[np.ndarray, np.ndarray]:
     """V (n,3), F (m,3) with ``n_fins`` fins: a triangle standing on the first edge of a random face (``seed``),
     its apex a new vertex ``height`` x the face's mean edge length out along the face normal. Returns (V2 (n+f,3),
