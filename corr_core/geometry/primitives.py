@@ -159,11 +159,11 @@ def manifold_patches(F: np.ndarray) -> tuple[int, np.ndarray]:
 def without_fins(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """The faces of the largest ``manifold_patches`` patch by area (ties: the lowest label), or F itself (the same
     object) when no edge has more than two faces. V: (n,3) float; F: (m,3) int. Returns (m2,3) int, rows of F."""
-    n_patches, labels = manifold_patches(F)
-    if n_patches < 2:
-        return F
     _, counts = unique_edges(F)
     if not (counts > 2).any():
+        return F
+    n_patches, labels = manifold_patches(F)
+    if n_patches < 2:
         return F
     area = np.bincount(labels, weights=face_areas(V, F), minlength=n_patches)
     return F[labels == int(np.argmax(area))]

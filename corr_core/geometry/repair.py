@@ -2,10 +2,9 @@
 
 Published scans carry duplicated faces (also in the opposite orientation), faces repeating a vertex, zero-area
 faces, unreferenced vertices, inconsistent face orientation, fins on non-manifold edges, stray pieces and holes.
-``repair_mesh`` fixes what
-can be fixed by changing only the *faces*: vertex ``i`` stays vertex ``i``, so ground truth such as "vertex i
-matches vertex i" and landmark vertex ids survive. Vertices that no face uses afterwards are simply ignored
-(``normalize_mesh`` and the renderer use referenced vertices only).
+``repair_mesh`` fixes what can be fixed by changing only the *faces*: vertex ``i`` stays vertex ``i``, so ground
+truth such as "vertex i matches vertex i" and landmark vertex ids survive. Vertices that no face uses afterwards
+are simply ignored (``normalize_mesh`` and the renderer use referenced vertices only).
 
 Every finding is a ``RepairRecord``; ``as_dict()`` gives its stored, JSON-ready form::
 
@@ -344,12 +343,13 @@ def repair_mesh(V: np.ndarray, F: np.ndarray, name: str = "mesh", *, keep_larges
     """Repair the faces of a mesh; vertices and their ids are never changed.
 
     Steps, each reported when it finds something: weld seams (``weld``: faces re-pointed from a vertex to the
-    lowest-numbered used vertex at exactly its position, ``coincident_representatives``); drop faces repeating a vertex; drop duplicate faces (same
-    three vertices in either orientation; the first is kept); drop zero-area faces; orient faces consistently
-    (``orient``); with ``keep_largest_component``, drop the faces joined to the surface only along non-manifold
-    edges (fins, ``primitives.without_fins``); report remaining non-manifold edges and the vertices no face uses;
-    keep only the largest connected component by area (``keep_largest_component``, for intrinsic methods: the
-    record counts the vertices of the pieces left out) or report the components; report boundary loops.
+    lowest-numbered used vertex at exactly its position, ``coincident_representatives``); drop faces repeating a
+    vertex; drop duplicate faces (same three vertices in either orientation; the first is kept); drop zero-area
+    faces; orient faces consistently (``orient``); with ``keep_largest_component``, drop the faces joined to the
+    surface only along non-manifold edges (fins, ``primitives.without_fins``); report remaining non-manifold edges
+    and the vertices no face uses; keep only the largest connected component by area (``keep_largest_component``,
+    for intrinsic methods: the record counts the vertices of the pieces left out) or report the components;
+    report boundary loops.
 
     Args:
         V: (n,3) float vertex positions; F: (m,3) int faces; name: the file, for messages.
