@@ -185,17 +185,22 @@ def _robust_kabsch_batch(X: np.ndarray, Y: np.ndarray, *, iterations: int = 4, c
 
 def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, n_patches: int = 300,
                      patch_size: int = 64, icp_iterations: int = 6, rounds: int = 5, trim: float = 2.0,
-                     n_candidates: int | None = None, normal_cos: float = -1.0) -> np.ndarray:
+                     n_candidates: int | None = None, normal_cos: float = -1.0, partners: str = "plane"
+                     ) -> np.ndarray:
     """Local rigid alignment (patch-wise ICP) of the template onto the target, then nearest vertices.
 
     A body moves almost rigidly at the scale of a small patch, so each template patch -- the ``patch_size``
     template samples geodesically nearest to one of the first ``n_patches`` farthest-point samples (about a
     geodesic disc of radius sqrt(patch_size / (pi * n_samples)) sqrt(area)) -- is aligned to the target: a robust
     rigid fit to its current images (``_robust_kabsch_batch``: pairs far off the patch's consensus are dropped),
-    then ``icp_iterations`` of point-to-point ICP against the nearest target vertices (pairs farther than ``trim``
+    then ``icp_iterations`` of ICP against the nearest target vertices (pairs farther than ``trim``
     x the patch's median distance get no weight; ``normal_cos`` > -1 also requires the moved template normal and
     the target normal to make a cosine above it -- off by default: it did not help on the course SCAPE poses and
-    made the coarse generated humanoid worse, the trimming already drops such pairs). Every template vertex is moved by the transform of its geodesically nearest patch centre and takes
+    made the coarse generated humanoid worse, the trimming already drops such pairs). A point's ICP partner is its
+    nearest target vertex projected onto that vertex's tangent plane (``partners="plane"``, point-to-plane ICP: a
+    patch then slides along the surface instead of snapping to the vertices, which matters on a target coarser
+    than the template) or the vertex itself (``partners="vertex"``, the older point-to-point ICP). Every template
+    vertex is moved by the transform of its geodesically nearest patch centre and takes
     the nearest normal-compatible target vertex (cosine > 0) to its moved position (``n_candidates`` = an int
     restricts it instead to the ``n_candidates`` target vertices nearest to its current image, the older
     behaviour: it cannot move more than a few edges a round). ``rounds`` repeats this from the new map.
@@ -207,8 +212,15 @@ def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, n
     sizes 64 and 96 0.01301 and 0.01293, 128 and 192 worse (0.01382, 0.01958), 32 too (0.01546 against 0.01325
     on the 18 maps right at both, and one more flip), so both stay.
 
+    Point-to-plane partners: on the remeshed course poses (`python bench/correspondence.py --pairs 20 --methods
+    dense_sparse,dense_auto --data /tmp/scape_remeshed`) mean errors 0.0109 / 0.0113 against 0.0113 / 0.0116 with
+    the vertices, on the course poses 0.0095 / 0.0098 against 0.0096 / 0.0101, at the same time (docs/dense.md
+    "Point-to-plane ICP").
+
     Args: source, target: bases; p2p: (n_s,) int current map. Returns (n_s,) int refined map.
     """
+    if partners not in ICP_PARTNERS:
+        raise ValueError(f"refine_extrinsic: partners must be one of {ICP_PARTNERS}, got {partners!r}")
     p2p = np.asarray(p2p, dtype=np.int64).copy()
     n_patches = min(n_patches, len(source.samples))
     patch_size = min(patch_size, len(source.samples))
@@ -219,12 +231,12 @@ def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, n
     for _ in range(rounds):
         R, t = _robust_kabsch_batch(X, target.V[p2p[members]])
         for _ in range(icp_iterations):
-            j, d = _icp_pairs(tree, N_t, np.einsum("bij,bpj->bpi", R, X) + t[:, None, :],
-                              N_s[members], R, normal_cos)
+            moved = np.einsum("bij,bpj->bpi", R, X) + t[:, None, :]
+            j, d = _icp_pairs(tree, N_t, moved, N_s[members], R, normal_cos)
             finite = np.isfinite(d)
             med = _finite_row_median(d, finite)
             w = (finite & (d <= trim * med + 1e-12)).astype(float)
-            R, t = _kabsch_batch(X, target.V[j], w)
+            R, t = _kabsch_batch(X, _icp_targets(target, N_t, moved, j, partners), w)
         new = _assign(tree, target, p2p, np.einsum("nij,nj->ni", R[owner], source.V) + t[owner],
                       np.einsum("nij,nj->ni", R[owner], N_s), N_t, n_candidates)
         if np.array_equal(new, p2p):
@@ -264,6 +276,21 @@ def _icp_pairs(tree: PointTree, normals_t: np.ndarray, moved: np.ndarray, patch_
         j, d = nearest_compatible(tree, normals_t, moved.reshape(-1, 3), normals.reshape(-1, 3),
                                   min_cos=normal_cos)
     return j.reshape(shape), d.reshape(shape)
+
+
+ICP_PARTNERS = ("plane", "vertex")          # ``refine_extrinsic``'s ICP partners
+
+
+def _icp_targets(target: MeshBasis, normals_t: np.ndarray, moved: np.ndarray, j: np.ndarray, partners: str
+                 ) -> np.ndarray:
+    """Where the moved patch points (b,p,3) are pulled to: their partner vertices j (b,p) int (``"vertex"``) or
+    each point's projection onto the tangent plane of its partner (``"plane"``: v + (I - n n^T)(x - v), with the
+    unit vertex normal n), (b,p,3) float."""
+    Y = target.V[j]
+    if partners == "vertex":
+        return Y
+    N = normals_t[j]
+    return moved - np.einsum("bpc,bpc->bp", moved - Y, N)[..., None] * N
 
 
 def _finite_row_median(d: np.ndarray, finite: np.ndarray) -> np.ndarray:
