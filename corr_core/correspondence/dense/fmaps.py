@@ -132,11 +132,12 @@ def nearest_rows(queries: np.ndarray, points: np.ndarray, *, chunk: int = 256,
                  cells: RowCells | None = None) -> np.ndarray:
     """Index of the nearest row of ``points`` (p, d) for each row of ``queries`` (q, d) -> (q,) int.
 
-    Brute force in float32 (``|x|^2 - 2 x.y`` by BLAS in blocks of ``chunk`` queries that stay in cache; ties
-    to the lowest index): exact up to float32 rounding of the distances (relative 1e-7, far below the gaps between
-    neighbouring vertices in a spectral embedding), deterministic, and about 2.5x faster than float64 on the
-    course meshes (2000 queries among 12,500 points in 100 dimensions). With ``cells`` (a partition of the
-    points' rows, ``RowCells``) the same answer by a pruned search (``_nearest_rows_in_cells``).
+    Brute force in float32 (``|x|^2 - 2 x.y`` by BLAS in blocks of ``chunk`` queries that stay in cache), about
+    2.5x faster than float64 on the course meshes (2000 queries among 12,500 points in 100 dimensions); the rows
+    whose float32 score is within its rounding bound of the best are then scored again exactly (float64
+    differences, ``_nearest_scored``), so the answer is the exact nearest row of the float32 inputs, ties to the
+    lowest index, whatever BLAS's kernels round. With ``cells`` (a partition of the points' rows, ``RowCells``)
+    the same answer by a pruned search (``_nearest_rows_in_cells``).
     """
     queries = np.ascontiguousarray(queries, dtype=np.float32)
     points = np.ascontiguousarray(points, dtype=np.float32)
@@ -144,34 +145,55 @@ def nearest_rows(queries: np.ndarray, points: np.ndarray, *, chunk: int = 256,
         raise ValueError(f"nearest_rows: need (q, d) queries and (p >= 1, d) points, got {queries.shape} and "
                          f"{points.shape}")
     sq = np.einsum("ij,ij->i", points, points)
+    qq = np.einsum("ij,ij->i", queries, queries)
+    # |error| of a float32 |y|^2 - 2 x.y <= ~(d + 2) eps (|x|^2 + 2 |y|^2); twice that covers both scores compared
+    score_slack = 4.0 * (points.shape[1] + 2) * np.finfo(np.float32).eps * (qq + 2.0 * sq.max())
     if cells is not None:
         if len(cells.owner) != len(points):
             raise ValueError(f"nearest_rows: the cells partition {len(cells.owner)} rows, the points have "
                              f"{len(points)}")
-        return _nearest_rows_in_cells(queries, points, sq, cells)
+        return _nearest_rows_in_cells(queries, points, sq, qq, score_slack, cells)
     out = np.empty(len(queries), dtype=np.int64)
     for s in range(0, len(queries), chunk):
-        out[s:s + chunk] = _nearest_scored(queries[s:s + chunk], points, sq)
+        out[s:s + chunk] = _nearest_scored(queries[s:s + chunk], points, sq, score_slack[s:s + chunk])
     return out
 
 
-def _nearest_scored(queries: np.ndarray, points: np.ndarray, sq: np.ndarray) -> np.ndarray:
-    """Argmin over the rows of ``points`` (p, d) float32 of ``sq - 2 q.p`` (sq: (p,) their squared norms) for each
-    of the (b, d) float32 ``queries``: (b,) int, ties to the lowest row."""
+def _nearest_scored(queries: np.ndarray, points: np.ndarray, sq: np.ndarray, score_slack: np.ndarray) -> np.ndarray:
+    """Nearest row of ``points`` (p, d) float32 for each of the (b, d) float32 ``queries`` -> (b,) int.
+
+    Scored by BLAS as ``sq - 2 q.p`` (sq: (p,) the points' squared norms); the rows within ``score_slack`` (b,) of
+    a query's best score (float32 rounding) are scored again as float64 squared differences and the least kept,
+    ties to the lowest row. BLAS may round one product differently at another place in the matrix (a row at a
+    tile's edge goes through another kernel), so only the second scoring makes the answer independent of which
+    rows are scored together (the pruned search scores subsets) and of the machine.
+    """
     d = queries @ points.T
     d *= -2.0
     d += sq[None, :]
-    return np.argmin(d, axis=1)
+    best = np.argmin(d, axis=1)
+    close = d <= (d[np.arange(len(d)), best] + score_slack)[:, None]
+    tied = np.flatnonzero(np.count_nonzero(close, axis=1) > 1)
+    if len(tied) == 0:
+        return best
+    q_of, rows = np.nonzero(close[tied])                    # row-major: each query's candidates in ascending order
+    diff = queries[tied[q_of]].astype(np.float64) - points[rows].astype(np.float64)
+    exact = np.einsum("ij,ij->i", diff, diff)
+    order = np.lexsort((rows, exact, q_of))                 # per query: least distance, then lowest row
+    first = np.flatnonzero(np.r_[True, q_of[order][1:] != q_of[order][:-1]])
+    best[tied] = rows[order[first]]
+    return best
 
 
-def _nearest_rows_in_cells(queries: np.ndarray, points: np.ndarray, sq: np.ndarray, cells: RowCells, *,
-                           block: int = 2048, group: int = 32) -> np.ndarray:
+def _nearest_rows_in_cells(queries: np.ndarray, points: np.ndarray, sq: np.ndarray, qq: np.ndarray,
+                           score_slack: np.ndarray, cells: RowCells, *, block: int = 2048,
+                           group: int = 32) -> np.ndarray:
     """``nearest_rows`` by cells: the distance of a query to any member of a cell is at least its distance to the
     centre minus the cell's radius R (the triangle inequality, in the points' own space), so the cells whose
     bound exceeds the distance to the nearest centre cannot hold the nearest row. Queries are taken in groups of
     ``group`` with neighbouring nearest centres (``cells.rank``) and each group scored by one product against the
-    members of every cell one of them still needs, in ascending row order. The scores are the brute force's
-    (float32, ties to the lowest row); the bounds are widened by a bound on float32's rounding of
+    members of every cell one of them still needs, in ascending row order, then near ties scored exactly as in
+    the brute force (``_nearest_scored``); the bounds are widened by a bound on float32's rounding of
     ``|x|^2 - 2 x.y`` so that rounding never prunes the nearest row. A spectral embedding is a surface in k
     dimensions, so a query needs a few cells: with ``MeshBasis.vertex_cells`` 0.32-0.38 of the brute force's time for
     2,000 queries among a course pose's 12,500 vertices, 0.61-0.69 for 1,000 among a generated body's 4,700
@@ -183,7 +205,6 @@ def _nearest_rows_in_cells(queries: np.ndarray, points: np.ndarray, sq: np.ndarr
     offset = points - C[owner]
     radius = np.zeros(len(centres), dtype=np.float32)
     np.maximum.at(radius, owner, np.sqrt(np.einsum("ij,ij->i", offset, offset)))
-    qq = np.einsum("ij,ij->i", queries, queries)
     # |error| of a float32 |x|^2 + |y|^2 - 2 x.y <= ~2 d eps (|x|^2 + |y|^2); its square root bounds the distance's
     slack = 2.0 * np.sqrt(2.0 * points.shape[1] * np.finfo(np.float32).eps * (qq + sq.max()))
     out = np.empty(len(queries), dtype=np.int64)
@@ -203,7 +224,7 @@ def _nearest_rows_in_cells(queries: np.ndarray, points: np.ndarray, sq: np.ndarr
         for g in range(0, len(Q), group):
             rows = order[g:g + group]
             members = np.flatnonzero(needed[rows].any(axis=0)[owner])
-            out[s + rows] = members[_nearest_scored(Q[rows], points[members], sq[members])]
+            out[s + rows] = members[_nearest_scored(Q[rows], points[members], sq[members], score_slack[s + rows])]
     return out
 
 

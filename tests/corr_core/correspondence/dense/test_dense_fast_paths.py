@@ -77,6 +77,21 @@ def test_nearest_rows_is_the_exact_nearest_neighbour_with_lowest_index_ties():
         fmaps.nearest_rows(queries, points[:, :3])
 
 
+def test_nearest_rows_is_exact_where_float32_scores_cannot_tell_the_rows_apart():
+    """Far from the origin float32 ``|y|^2 - 2 x.y`` rounds by more than the gaps between the candidates: the
+    answer must still be the exact nearest row of the float32 inputs, ties to the lowest row."""
+    rng = np.random.default_rng(8)
+    points = (100.0 + 0.01 * rng.normal(size=(600, 20))).astype(np.float32)
+    points[300:310] = points[200:210]                                   # bit-identical duplicates
+    queries = (points[rng.integers(0, 600, 250)] + 0.003 * rng.normal(size=(250, 20))).astype(np.float32)
+    queries[:10] = points[300:310]                                      # queries that sit on a duplicate
+    exact = ((queries[:, None, :].astype(np.float64) - points[None, :, :].astype(np.float64)) ** 2).sum(axis=2)
+    expected = np.argmin(exact, axis=1)
+    assert np.array_equal(expected[:10], np.arange(200, 210))
+    for chunk in (7, 256):
+        assert np.array_equal(fmaps.nearest_rows(queries, points, chunk=chunk), expected)
+
+
 def _random_cells(n_points: int, n_centres: int, seed: int) -> fmaps.RowCells:
     """A partition with no geometric sense: the pruned search must stay exact, only slower."""
     rng = np.random.default_rng(seed)
