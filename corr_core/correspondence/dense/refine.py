@@ -214,8 +214,8 @@ def refine_extrinsic(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, n
 
     Point-to-plane partners: on the remeshed course poses (`python bench/correspondence.py --pairs 20 --methods
     dense_sparse,dense_auto --data /tmp/scape_remeshed`) mean errors 0.0109 / 0.0113 against 0.0113 / 0.0116 with
-    the vertices, on the course poses 0.0095 / 0.0098 against 0.0096 / 0.0101, at the same time (docs/dense.md
-    "Point-to-plane ICP").
+    the vertices, on the course poses 0.0095 / 0.0098 against 0.0096 / 0.0101, at the same time (at 3040154,
+    before 344693e's exact near ties; docs/dense.md "Point-to-plane ICP").
 
     Args: source, target: bases; p2p: (n_s,) int current map. Returns (n_s,) int refined map.
     """

@@ -14,6 +14,7 @@ from scipy.spatial import cKDTree
 from corr_core.correspondence.dense import dense_map, measures, mesh_basis, transfer_landmarks
 from corr_core.generate import humanoid
 from corr_core.generate.defects import cut_along_a_seam, with_fins
+from corr_core.geometry.primitives import surface_area
 
 K, K_INIT, N_SAMPLES = 40, 20, 600
 FAST = {"extrinsic": {"n_patches": 120, "rounds": 4}}
@@ -49,11 +50,6 @@ def _run(body, V_t, F_t, B_t, sparse_target=None, **kw):
     lm = {} if sparse_target is None else {"landmarks_template": body["sparse"], "landmarks_target": sparse_target}
     return dense_map(body["V"], body["F"], V_t, F_t, basis_template=body["S"], basis_target=B_t, k=K,
                      k_init=K_INIT, refine_options=FAST, **lm, **kw)
-
-
-def _area(V, F) -> float:
-    """Surface area of a mesh V (n,3), F (m,3)."""
-    return float(0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum())
 
 
 def _mean_error(V_t, F_t, p2p, truth):
@@ -138,7 +134,7 @@ def test_a_person_of_another_size_gets_the_map_of_the_same_person_at_the_templat
     exactly the template's area: the pose at its own size is inside ``SIZE_DEAD_ZONE``, so it is not rescaled, and a
     length change of a percent already moves a few percent of the vertices (point-to-plane ICP: 3 %)."""
     truth = np.arange(len(body["V"]))
-    to_template_area = np.sqrt(_area(body["V"], body["F"]) / _area(body["Vp"], body["F"]))
+    to_template_area = np.sqrt(surface_area(body["V"], body["F"]) / surface_area(body["Vp"], body["F"]))
     V_ref = body["Vp"] * to_template_area
     for sparse in (None, body["sparse"]):
         as_is = _run(body, V_ref, body["F"], _basis(V_ref, body["F"]), sparse_target=sparse)

@@ -434,24 +434,17 @@ def test_refine_best_scores_every_surviving_hypothesis_over_its_steps(pair, monk
     assert best.scores == pytest.approx([np.sqrt(d_turned * d_truth), d_truth])
 
 
-def _fibonacci_sphere(n: int) -> np.ndarray:
-    """(n,3) points spread evenly on the unit sphere."""
-    i = np.arange(n) + 0.5
-    z, phi = 1.0 - 2.0 * i / n, np.pi * (1.0 + 5 ** 0.5) * i
-    r = np.sqrt(1.0 - z * z)
-    return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
-
-
 def test_point_to_plane_partners_lie_on_the_surface_between_the_vertices():
     """Points on a coarse unit sphere (200 vertices, edges about 0.25) paired with their nearest vertex: the vertex
     itself is about a third of an edge away, its tangent-plane projection (``partners="plane"``) only the sphere's
     curvature away, so a patch is pulled to the surface, not to the vertices (what makes the extrinsic step hold on
     a target coarser than the template)."""
     from corr_core.correspondence.dense.refine import _icp_targets
+    from tests.helpers import sphere
 
-    V_t = _fibonacci_sphere(200)
+    V_t = sphere(200)[0]
     T = type("Target", (), {"V": V_t})()
-    moved = _fibonacci_sphere(5000)[None]                               # (1, 5000, 3), on the true surface
+    moved = sphere(5000)[0][None]                               # (1, 5000, 3), on the true surface
     j = cKDTree(V_t).query(moved[0])[1][None]
     to_vertex = np.linalg.norm(_icp_targets(T, V_t, moved, j, "vertex") - moved, axis=2).mean()
     on_plane = _icp_targets(T, V_t, moved, j, "plane")
