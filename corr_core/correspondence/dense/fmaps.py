@@ -177,8 +177,11 @@ def _nearest_scored(queries: np.ndarray, points: np.ndarray, sq: np.ndarray, sco
     if len(tied) == 0:
         return best
     q_of, rows = np.nonzero(close[tied])                    # row-major: each query's candidates in ascending order
-    diff = queries[tied[q_of]].astype(np.float64) - points[rows].astype(np.float64)
-    exact = np.einsum("ij,ij->i", diff, diff)
+    exact = np.empty(len(rows))
+    step = max(1, (1 << 20) // queries.shape[1])            # 8 MB of float64 differences at a time
+    for s in range(0, len(rows), step):
+        diff = queries[tied[q_of[s:s + step]]].astype(np.float64) - points[rows[s:s + step]].astype(np.float64)
+        exact[s:s + step] = np.einsum("ij,ij->i", diff, diff)
     order = np.lexsort((rows, exact, q_of))                 # per query: least distance, then lowest row
     first = np.flatnonzero(np.r_[True, q_of[order][1:] != q_of[order][:-1]])
     best[tied] = rows[order[first]]

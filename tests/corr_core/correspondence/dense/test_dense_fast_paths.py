@@ -92,6 +92,26 @@ def test_nearest_rows_is_exact_where_float32_scores_cannot_tell_the_rows_apart()
         assert np.array_equal(fmaps.nearest_rows(queries, points, chunk=chunk), expected)
 
 
+def test_nearest_rows_scores_many_near_ties_in_bounded_memory():
+    """Every row a near tie in float32 (64 queries x 5,000 rows in 100 dimensions, all within rounding): the exact
+    second scoring goes through the candidates in slices, not one (320,000 x 100) float64 array (512 MB for the
+    two operands)."""
+    import tracemalloc
+
+    rng = np.random.default_rng(9)
+    points = (100.0 + 0.01 * rng.normal(size=(5000, 100))).astype(np.float32)
+    queries = points[:64] + np.float32(0.001)
+    tracemalloc.start()
+    try:
+        found = fmaps.nearest_rows(queries, points)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    exact = ((queries[:, None, :].astype(np.float64) - points[None].astype(np.float64)) ** 2).sum(axis=2)
+    assert np.array_equal(found, np.argmin(exact, axis=1))
+    assert peak < 100e6, f"{peak / 1e6:.0f} MB"
+
+
 def _random_cells(n_points: int, n_centres: int, seed: int) -> fmaps.RowCells:
     """A partition with no geometric sense: the pruned search must stay exact, only slower."""
     rng = np.random.default_rng(seed)
