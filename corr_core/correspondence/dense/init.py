@@ -44,6 +44,13 @@ LOCAL_SCALES = (0.1, 0.2, 0.4)       # widths of exp(-(d/s)^2), units sqrt(area)
 # plateau, 0.3 stays.
 CHIRALITY_WEIGHT = 0.3
 ZOOMOUT_SAMPLES = 2000           # template samples (and target samples or vertices) ZoomOut iterates on
+# Growth of the basis per ZoomOut iteration of the starting maps (``map_from_points``; the final ZoomOut of every
+# automatic hypothesis; the probes keep 5). Chosen by `python bench/zoomout_steps.py --seeds 10-13 --steps 2,4,6`
+# (generated other bodies, 20 targets, k 30 -> 60, from the 5 points: mean errors 0.01304 / 0.01254 / 0.01262,
+# step 4 lower on 12 of 20) and the same with `--course-settings` (k 40 -> 100; from the points 0.01356 / 0.01358 /
+# 0.01389, automatic 0.01515 / 0.01482 / 0.01450; no flip at any step): 4 is as accurate as 2 or better at 21 % less
+# CPU time for the sparse map, 18 % for the automatic one; 6 is worse from the points (docs/dense.md "ZoomOut step").
+ZOOMOUT_STEP = 4
 # Candidates kept: chirality agreement above this fraction of the best's. `python bench/chirality_pool.py --seeds
 # 10-14 --poses 4` (generated other bodies): right maps 0.773-1.000 of the best's, turns 0.839-1.000, twists
 # 0.323-0.889, so 2/3 keeps every right map (margin 0.106) and drops only the clearest twists (docs/dense.md).
@@ -99,8 +106,8 @@ def fmap_from_points(source: MeshBasis, target: MeshBasis, points_source: np.nda
 
 
 def map_from_points(source: MeshBasis, target: MeshBasis, points_source, points_target, *, k_init: int = 40,
-                    k_end: int = 100, step: int = 2, features=None, n_zoomout: int | None = ZOOMOUT_SAMPLES,
-                    all_target_vertices: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                    k_end: int = 100, step: int = ZOOMOUT_STEP, features=None,
+                    n_zoomout: int | None = ZOOMOUT_SAMPLES, all_target_vertices: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Functional map from corresponding points, refined by ZoomOut on the samples.
 
     ZoomOut (adjoint point maps, ``zoomout.zoomout``) iterates on the first ``n_zoomout`` template samples (None:
@@ -305,7 +312,7 @@ def cached_extremities(basis: MeshBasis) -> np.ndarray:
 
 def map_automatic(source: MeshBasis, target: MeshBasis, points_source: np.ndarray | None = None,
                   points_target: np.ndarray | None = None, *, keep: int = 4, k_init: int = 40, k_probe: int = 60,
-                  k_end: int = 100, step: int = 2, n_probe: int = 1000, orientation_neighbours: int = 64,
+                  k_end: int = 100, step: int = ZOOMOUT_STEP, n_probe: int = 1000, orientation_neighbours: int = 64,
                   return_info: bool = False):
     """A map with no point given on the target (module docstring): the best ranked of
     ``automatic_hypotheses``.
@@ -367,7 +374,7 @@ def hypotheses_to_refine(chirality, wks, *, keep_fraction: float = CHIRALITY_POO
 def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int | None = None,
                          points_source: np.ndarray | None = None,
                          points_target: np.ndarray | None = None, *, keep: int = 4, k_init: int = 40,
-                         k_probe: int = 60, k_end: int = 100, step: int = 2, n_probe: int = 1000,
+                         k_probe: int = 60, k_end: int = 100, step: int = ZOOMOUT_STEP, n_probe: int = 1000,
                          orientation_neighbours: int = 64, chirality_weight: float = CHIRALITY_WEIGHT,
                          return_info: bool = False):
     """The best ranked automatic maps (``rank_candidates``: ``map_automatic``'s choice first, then the next in the

@@ -1,0 +1,165 @@
+"""The ZoomOut step of the dense map's starting maps (``init.ZOOMOUT_STEP``): error and cost per step value.
+
+For every target, each mode's starting map is made with each ``--steps`` value (the growth of the basis per
+ZoomOut iteration, from ``k_init`` to ``k``: ``init.map_from_points(step=)`` for ``sparse``, the 5 sparse landmarks
+given on both meshes; ``init.automatic_hypotheses(step=)`` for ``auto``, the final ZoomOut of every hypothesis),
+then upsampled and refined as ``dense_map`` does (``refine.refine_best`` with the default plan). Printed per target
+and step: mean geodesic error / sqrt(area) of the map at the template's first ``eval_vertices`` samples, "F" when
+flipped (landmark accuracy < 0.5), CPU seconds of the map (initialisation + refinement). The summary, per mode and
+step: mean and median error, targets lower / higher than at the first step listed, flips, mean CPU seconds.
+
+Data: generated bodies of other people (``--seeds``: ``write_humanoid_dataset(vary_bodies=True)``, ``--poses``
+poses and a decimated, vertex-shuffled copy of pose 1 per seed; the truth only scores), at the settings of the
+default and bodies pipelines (k 60, 1,000 samples, k_init 30, 150 patches) or with ``--course-settings`` at the
+code's defaults (k 100, 2,000 samples, k_init 40, 300 patches: pipelines/scape.yaml's, where the automatic mode's
+final ZoomOut runs from the probes' k 60 to 100; at k 60 it has no iteration left). ``--data DIR`` instead runs
+template -> test meshes of a folder in the course SCAPE layout (e.g. ``/tmp/scape_remeshed`` from
+``bench/remesh_scape.py``; ground truth and landmarks as ``bench/correspondence.py`` reads them), code defaults.
+
+Run:  python bench/zoomout_steps.py [--seeds 10-11] [--poses 4] [--course-settings] [--data DIR --pairs N]
+                                    [--steps 2,3,4,6] [--modes sparse,auto] [--json OUT]
+"""
+from __future__ import annotations
+
+import argparse
+import glob
+import json
+import os
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from bench._env import one_blas_thread  # noqa: E402
+
+if __name__ == "__main__":
+    one_blas_thread()
+
+import numpy as np  # noqa: E402
+
+CODE_SETTINGS = {"k": 100, "n_samples": 2000, "k_init": 40, "n_patches": 300, "eval_vertices": 2000}
+
+
+def map_with_step(S, T, mode: str, step: int, settings: dict, sparse: tuple) -> np.ndarray:
+    """The dense map (original ids) of one mode with ZoomOut step ``step``, made and refined as ``dense_map``."""
+    from corr_core.correspondence.dense import init, refine
+    from corr_core.correspondence.dense.basis import map_to_original
+
+    if mode == "sparse":
+        starts = [init.map_from_points(S, T, sparse[0], sparse[1], k_init=settings["k_init"], k_end=settings["k"],
+                                       step=step)]
+    else:
+        starts = init.automatic_hypotheses(S, T, None, k_init=settings["k_init"], k_end=settings["k"], step=step)
+    maps = [refine.upsample_spectral(S, T, C, p2p) for C, p2p in starts]
+    plan = refine.refine_plan(refine.DEFAULT_REFINE, {"extrinsic": {"n_patches": settings["n_patches"]}})
+    return map_to_original(S, T, refine.refine_best(S, T, maps, plan).p2p)
+
+
+def scape_targets(data: str, pairs: int | None):
+    """(template (V, F), landmark ids, sparse (ids, names), [(name, V, F, truth, landmarks, sparse (2,) ids)]) of
+    a folder in the course SCAPE layout, read as ``bench/correspondence.py`` does."""
+    from bench.correspondence import pair_truth
+    from corr_core.correspondence.landmarks import read_landmarks
+    from corr_core.geometry.mesh_io import load_mesh
+
+    V_s, F_s = load_mesh(os.path.join(data, "meshes", "template", "mesh000.obj"))
+    lm_ids, lm_names = read_landmarks(os.path.join(data, "landmark_vids.txt"), n_vertices=len(V_s))
+    _, sparse_names = read_landmarks(os.path.join(data, "sparse_landmark_vids.txt"), n_vertices=len(V_s))
+    for path in sorted(glob.glob(os.path.join(data, "meshes", "test", "*.obj")))[:pairs]:
+        name = os.path.splitext(os.path.basename(path))[0]
+        V, F = load_mesh(path)
+        given = pair_truth(data, name, lm_names, lm_ids, sparse_names, len(V_s), len(V))
+        yield (V_s, F_s), lm_ids, name, V, F, given["truth"], given["landmarks"], (given["sparse"][:, 0],
+                                                                                    given["sparse"][:, 1])
+
+
+def generated_pairs(work: str, seeds: list[int], poses: int, settings: dict):
+    """The same tuples for generated bodies of other people (``bench.dense_hypotheses.generated_template``)."""
+    from bench import dense_hypotheses as dh
+    from corr_core.correspondence.landmarks import read_landmarks
+    from corr_core.geometry.mesh_io import load_mesh
+
+    for seed in seeds:
+        dh.SETTINGS.update(settings)
+        root, V_s, _ = dh.generated_template(work, seed, poses, decimated=True, patch_geodesics=False)
+        F_s = load_mesh(os.path.join(root, "meshes", "template", "mesh000.obj"))[1]
+        lm_ids, _ = read_landmarks(os.path.join(root, "landmark_vids.txt"), n_vertices=len(V_s))
+        sparse, _ = read_landmarks(os.path.join(root, "sparse_landmark_vids.txt"), n_vertices=len(V_s))
+        for name, V, F, truth in dh.generated_targets(root, True):
+            yield (V_s, F_s), lm_ids, f"seed{seed}/{name}", V, F, truth, truth[lm_ids], (sparse, truth[sparse])
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seeds", default="10-11")
+    ap.add_argument("--poses", type=int, default=4)
+    ap.add_argument("--course-settings", action="store_true", help="k 100, 2,000 samples (the code's defaults)")
+    ap.add_argument("--data", default=None, help="a folder in the course SCAPE layout instead of generated bodies")
+    ap.add_argument("--pairs", type=int, default=None, help="with --data: only the first N test meshes")
+    ap.add_argument("--steps", default="2,3,4,6")
+    ap.add_argument("--modes", default="sparse,auto")
+    ap.add_argument("--work", default=None, help="folder for the generated data (default: a temporary one)")
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args(argv)
+
+    import tempfile
+
+    from bench.dense_hypotheses import SETTINGS, seed_range
+    from corr_core.correspondence.dense import basis, measures
+    from corr_core.correspondence.dense.transfer import transfer_landmarks
+    from corr_core.geometry.geodesic import GeodesicSolver
+
+    steps = [int(s) for s in args.steps.split(",")]
+    modes = args.modes.split(",")
+    if args.data:
+        settings, targets = CODE_SETTINGS, scape_targets(args.data, args.pairs)
+    else:
+        settings = CODE_SETTINGS if args.course_settings else dict(SETTINGS)
+        work = args.work or tempfile.mkdtemp(prefix="zoomout_steps_")
+        targets = generated_pairs(work, seed_range(args.seeds), args.poses, settings)
+    rows, template, S = [], None, None
+    for (V_s, F_s), lm_ids, name, V, F, truth, landmarks, sparse in targets:
+        if template is None or template[0] is not V_s:
+            template = (V_s, F_s)
+            S = basis.mesh_basis(V_s, F_s, k=settings["k"], n_samples=settings["n_samples"], name="template")
+            S.sample_distances(settings["n_patches"])
+        T = basis.mesh_basis(V, F, k=settings["k"], n_samples=settings["n_samples"], name=name)
+        solver = GeodesicSolver(V, F)
+        evaluated = S.vids[S.samples[:settings["eval_vertices"]]]
+        for mode in modes:
+            for step in steps:
+                t0 = time.process_time()
+                vertex_map = map_with_step(S, T, mode, step, settings, sparse)
+                seconds = time.process_time() - t0
+                errors = measures.dense_errors(V, F, {"m": vertex_map}, truth, vertices=evaluated, solver=solver)["m"]
+                _, nearest = measures.landmark_errors(V, F, transfer_landmarks(vertex_map, lm_ids), landmarks,
+                                                      solver=solver)
+                row = {"target": name, "mode": mode, "step": step, "mean_error": float(errors.mean()),
+                       "flipped": measures.landmark_accuracy(nearest) < 0.5, "seconds": seconds}
+                rows.append(row)
+                print(f"{name:16s} {mode:6s} step {step:2d}  {row['mean_error']:.5f}{' F' if row['flipped'] else ''}"
+                      f"  {seconds:.2f}s", flush=True)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"settings": settings, "data": args.data or f"bodies seeds {args.seeds}", "rows": rows}, f,
+                      indent=1)
+    print_summary(rows, modes, steps)
+    return 0
+
+
+def print_summary(rows: list[dict], modes: list[str], steps: list[int]) -> None:
+    """Per mode and step: mean / median error, lower / higher than the first step, flips, CPU seconds."""
+    print(f"\n{'mode':6s} {'step':>4s} {'mean':>8s} {'median':>8s} {'lower/higher':>13s} {'flips':>5s} {'CPU s':>6s}")
+    for mode in modes:
+        ref = {r["target"]: r["mean_error"] for r in rows if r["mode"] == mode and r["step"] == steps[0]}
+        for step in steps:
+            sel = [r for r in rows if r["mode"] == mode and r["step"] == step]
+            err = np.array([r["mean_error"] for r in sel])
+            lower = sum(r["mean_error"] < ref[r["target"]] for r in sel)
+            higher = sum(r["mean_error"] > ref[r["target"]] for r in sel)
+            print(f"{mode:6s} {step:4d} {err.mean():8.5f} {np.median(err):8.5f} {f'{lower} / {higher}':>13s} "
+                  f"{sum(r['flipped'] for r in sel):5d} {np.mean([r['seconds'] for r in sel]):6.2f}")
+    print(f"({len({r['target'] for r in rows})} targets; lower / higher: than at step {steps[0]})")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
