@@ -48,8 +48,10 @@ ZOOMOUT_SAMPLES = 2000           # template samples (and target samples or verti
 # automatic hypothesis; the probes keep 5). Chosen by `python bench/zoomout_steps.py --seeds 10-13 --steps 2,4,6`
 # (generated other bodies, 20 targets, k 30 -> 60, from the 5 points: mean errors 0.01304 / 0.01254 / 0.01262,
 # step 4 lower on 12 of 20) and the same with `--course-settings` (k 40 -> 100; from the points 0.01356 / 0.01358 /
-# 0.01389, automatic 0.01515 / 0.01482 / 0.01450; no flip at any step): 4 is as accurate as 2 or better at 21 % less
-# CPU time for the sparse map, 18 % for the automatic one; 6 is worse from the points (docs/dense.md "ZoomOut step").
+# 0.01389, automatic 0.01515 / 0.01482 / 0.01450; no flip at any step); the automatic maps again with `--seeds 14-17
+# --course-settings --steps 2,4 --modes auto`: 0.01588 / 0.01508, lower on 16 of 20. 4 is as accurate as 2 or better
+# at 21 % less CPU time for the sparse map, 17-18 % for the automatic one; 6 is worse from the points (docs/dense.md
+# "ZoomOut step").
 ZOOMOUT_STEP = 4
 # Candidates kept: chirality agreement above this fraction of the best's. `python bench/chirality_pool.py --seeds
 # 10-14 --poses 4` (generated other bodies): right maps 0.773-1.000 of the best's, turns 0.839-1.000, twists
