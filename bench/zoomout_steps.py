@@ -17,7 +17,7 @@ template -> test meshes of a folder in the course SCAPE layout (e.g. ``/tmp/scap
 ``bench/remesh_scape.py``; ground truth and landmarks as ``bench/correspondence.py`` reads them), code defaults.
 
 Run:  python bench/zoomout_steps.py [--seeds 10-11] [--poses 4] [--course-settings] [--data DIR --pairs N]
-                                    [--steps 2,3,4,6] [--modes sparse,auto] [--json OUT]
+                                    [--steps 2,3,4,6] [--modes sparse,auto] [--n-patches N] [--json OUT]
 """
 from __future__ import annotations
 
@@ -97,6 +97,8 @@ def main(argv=None) -> int:
     ap.add_argument("--pairs", type=int, default=None, help="with --data: only the first N test meshes")
     ap.add_argument("--steps", default="2,3,4,6")
     ap.add_argument("--modes", default="sparse,auto")
+    ap.add_argument("--n-patches", type=int, default=None,
+                    help="refine_extrinsic's patches (default: the settings', 150 at k 60, 300 at k 100)")
     ap.add_argument("--work", default=None, help="folder for the generated data (default: a temporary one)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
@@ -116,6 +118,8 @@ def main(argv=None) -> int:
         settings = CODE_SETTINGS if args.course_settings else dict(SETTINGS)
         work = args.work or tempfile.mkdtemp(prefix="zoomout_steps_")
         targets = generated_pairs(work, seed_range(args.seeds), args.poses, settings)
+    if args.n_patches is not None:
+        settings = {**settings, "n_patches": args.n_patches}
     rows, template, S = [], None, None
     for (V_s, F_s), lm_ids, name, V, F, truth, landmarks, sparse in targets:
         if template is None or template[0] is not V_s:
