@@ -54,38 +54,40 @@ def map_with_step(S, T, mode: str, step: int, settings: dict, sparse: tuple) -> 
     return map_to_original(S, T, refine.refine_best(S, T, maps, plan).p2p)
 
 
-def scape_targets(data: str, pairs: int | None):
-    """(template (V, F), landmark ids, sparse (ids, names), [(name, V, F, truth, landmarks, sparse (2,) ids)]) of
-    a folder in the course SCAPE layout, read as ``bench/correspondence.py`` does."""
+def scape_targets(data: str, pairs: int | None, settings: dict):
+    """Yield (template basis, template landmark ids (L,), name, V, F, truth (n_template,) int, the target's
+    landmark ids (L,), sparse: (template ids (5,), target ids (5,))) for every test mesh of a folder in the course
+    SCAPE layout, read as ``bench/correspondence.py`` does; the template basis (at ``settings``) made once."""
     from bench.correspondence import pair_truth
+    from corr_core.correspondence.dense import basis
     from corr_core.correspondence.landmarks import read_landmarks
     from corr_core.geometry.mesh_io import load_mesh
 
     V_s, F_s = load_mesh(os.path.join(data, "meshes", "template", "mesh000.obj"))
+    S = basis.mesh_basis(V_s, F_s, k=settings["k"], n_samples=settings["n_samples"], name="template")
     lm_ids, lm_names = read_landmarks(os.path.join(data, "landmark_vids.txt"), n_vertices=len(V_s))
     _, sparse_names = read_landmarks(os.path.join(data, "sparse_landmark_vids.txt"), n_vertices=len(V_s))
     for path in sorted(glob.glob(os.path.join(data, "meshes", "test", "*.obj")))[:pairs]:
         name = os.path.splitext(os.path.basename(path))[0]
         V, F = load_mesh(path)
         given = pair_truth(data, name, lm_names, lm_ids, sparse_names, len(V_s), len(V))
-        yield (V_s, F_s), lm_ids, name, V, F, given["truth"], given["landmarks"], (given["sparse"][:, 0],
-                                                                                    given["sparse"][:, 1])
+        yield S, lm_ids, name, V, F, given["truth"], given["landmarks"], (given["sparse"][:, 0],
+                                                                          given["sparse"][:, 1])
 
 
 def generated_pairs(work: str, seeds: list[int], poses: int, settings: dict):
-    """The same tuples for generated bodies of other people (``bench.dense_hypotheses.generated_template``)."""
+    """The same tuples for generated bodies of other people (``bench.dense_hypotheses.generated_template``, its
+    basis made at ``settings``' k and samples)."""
     from bench import dense_hypotheses as dh
     from corr_core.correspondence.landmarks import read_landmarks
-    from corr_core.geometry.mesh_io import load_mesh
 
+    dh.SETTINGS.update(k=settings["k"], n_samples=settings["n_samples"])     # what generated_template reads
     for seed in seeds:
-        dh.SETTINGS.update(settings)
-        root, V_s, _ = dh.generated_template(work, seed, poses, decimated=True, patch_geodesics=False)
-        F_s = load_mesh(os.path.join(root, "meshes", "template", "mesh000.obj"))[1]
+        root, V_s, S = dh.generated_template(work, seed, poses, decimated=True, patch_geodesics=False)
         lm_ids, _ = read_landmarks(os.path.join(root, "landmark_vids.txt"), n_vertices=len(V_s))
         sparse, _ = read_landmarks(os.path.join(root, "sparse_landmark_vids.txt"), n_vertices=len(V_s))
         for name, V, F, truth in dh.generated_targets(root, True):
-            yield (V_s, F_s), lm_ids, f"seed{seed}/{name}", V, F, truth, truth[lm_ids], (sparse, truth[sparse])
+            yield S, lm_ids, f"seed{seed}/{name}", V, F, truth, truth[lm_ids], (sparse, truth[sparse])
 
 
 def main(argv=None) -> int:
@@ -110,22 +112,32 @@ def main(argv=None) -> int:
     from corr_core.correspondence.dense.transfer import transfer_landmarks
     from corr_core.geometry.geodesic import GeodesicSolver
 
-    steps = [int(s) for s in args.steps.split(",")]
+    try:
+        steps = [int(s) for s in args.steps.split(",")]
+    except ValueError:
+        ap.error(f"--steps: comma-separated integers, got {args.steps!r}")
     modes = args.modes.split(",")
+    if min(steps) < 1:
+        ap.error(f"--steps: every step must be >= 1, got {args.steps}")
+    if set(modes) - {"sparse", "auto"}:
+        ap.error(f"--modes: sparse and/or auto, got {args.modes}")
+    if args.n_patches is not None and args.n_patches < 1:
+        ap.error(f"--n-patches must be >= 1, got {args.n_patches}")
+    if args.data and not os.path.isfile(os.path.join(args.data, "meshes", "template", "mesh000.obj")):
+        print(f"no SCAPE data under {args.data} (expected meshes/template/mesh000.obj and meshes/test/*.obj)",
+              file=sys.stderr)
+        return 2
+    settings = dict(CODE_SETTINGS if args.data or args.course_settings else SETTINGS)
+    if args.n_patches is not None:
+        settings["n_patches"] = args.n_patches
     if args.data:
-        settings, targets = CODE_SETTINGS, scape_targets(args.data, args.pairs)
+        targets = scape_targets(args.data, args.pairs, settings)
     else:
-        settings = CODE_SETTINGS if args.course_settings else dict(SETTINGS)
         work = args.work or tempfile.mkdtemp(prefix="zoomout_steps_")
         targets = generated_pairs(work, seed_range(args.seeds), args.poses, settings)
-    if args.n_patches is not None:
-        settings = {**settings, "n_patches": args.n_patches}
-    rows, template, S = [], None, None
-    for (V_s, F_s), lm_ids, name, V, F, truth, landmarks, sparse in targets:
-        if template is None or template[0] is not V_s:
-            template = (V_s, F_s)
-            S = basis.mesh_basis(V_s, F_s, k=settings["k"], n_samples=settings["n_samples"], name="template")
-            S.sample_distances(settings["n_patches"])
+    rows = []
+    for S, lm_ids, name, V, F, truth, landmarks, sparse in targets:
+        S.sample_distances(settings["n_patches"])           # the patches' geodesics: once per template basis
         T = basis.mesh_basis(V, F, k=settings["k"], n_samples=settings["n_samples"], name=name)
         solver = GeodesicSolver(V, F)
         evaluated = S.vids[S.samples[:settings["eval_vertices"]]]

@@ -109,13 +109,14 @@ def fmap_from_points(source: MeshBasis, target: MeshBasis, points_source: np.nda
 
 def map_from_points(source: MeshBasis, target: MeshBasis, points_source, points_target, *, k_init: int = 40,
                     k_end: int = 100, step: int = ZOOMOUT_STEP, features=None,
-                    n_zoomout: int | None = ZOOMOUT_SAMPLES, all_target_vertices: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                    n_zoomout: int | None = ZOOMOUT_SAMPLES,
+                    all_target_vertices: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Functional map from corresponding points, refined by ZoomOut on the samples.
 
     ZoomOut (adjoint point maps, ``zoomout.zoomout``) iterates on the first ``n_zoomout`` template samples (None:
     all), matched to every target vertex (``all_target_vertices``) or to the target's first ``n_zoomout`` samples;
-    the returned point map is computed at all template samples with the final functional map. ``points_source`` / ``points_target`` are original
-    vertex ids (as in landmark files; ``MeshBasis.to_local`` converts them).
+    the returned point map is computed at all template samples with the final functional map. ``points_source`` /
+    ``points_target`` are original vertex ids (as in landmark files; ``MeshBasis.to_local`` converts them).
     Returns: C: (k_end, k_end) functional map, p2p_samples: (len(source.samples),) int target vertex of each
     template sample.
     """

@@ -32,8 +32,9 @@ def zoomout(source: MeshBasis, target: MeshBasis, C: np.ndarray, *, k_end: int =
             the sample spacing, so the quantization costs little there, and each iteration is n_t / n_target times
             cheaper (6x on the course meshes). The default 0.1 (then the 5 iterations k = 90..98 at step 2, to
             100; at ``init.ZOOMOUT_STEP`` 4 from 40, k = 92 and 96) kept the final dense error of matching every
-            vertex in every iteration on course SCAPE pairs, at a quarter of the cost; a hard pair can still land in another basin (better or worse: seen both ways on
-            generated bodies). 1.0 restores the all-vertex schedule.
+            vertex in every iteration on course SCAPE pairs, at a quarter of the cost; a hard pair can still
+            land in another basin (better or worse: seen both ways on generated bodies). 1.0 restores the
+            all-vertex schedule.
         adjoint: point maps as ``fmaps.p2p_from_fmap(adjoint=...)``.
     Returns:
         C: (k_end, k_end) refined functional map.

@@ -444,7 +444,7 @@ def test_point_to_plane_partners_lie_on_the_surface_between_the_vertices():
 
     V_t = sphere(200)[0]
     T = type("Target", (), {"V": V_t})()
-    moved = sphere(5000)[0][None]                               # (1, 5000, 3), on the true surface
+    moved = sphere(5000)[0][None]            # (1, 5000, 3), on the true surface
     j = cKDTree(V_t).query(moved[0])[1][None]
     to_vertex = np.linalg.norm(_icp_targets(T, V_t, moved, j, "vertex") - moved, axis=2).mean()
     on_plane = _icp_targets(T, V_t, moved, j, "plane")
