@@ -46,6 +46,21 @@ def body():
             "sparse": np.array([lms[n] for n in humanoid.SPARSE_LANDMARK_NAMES])}
 
 
+@pytest.fixture(scope="module")
+def pose_maps(body):
+    """The maps of the posed copy as it is, automatic (``"auto"``) and from the 5 points (``"sparse"``): the
+    reference of the tests that change the target and expect the same map, made once for them all."""
+    maps = {"auto": _run(body, body["Vp"], body["F"], body["T"]),
+            "sparse": _run(body, body["Vp"], body["F"], body["T"], sparse_target=body["sparse"])}
+    for p2p in maps.values():
+        p2p.setflags(write=False)                  # shared: a test that changed one would change the others'
+    return maps
+
+
+def _mode(sparse) -> str:
+    return "auto" if sparse is None else "sparse"
+
+
 def _run(body, V_t, F_t, B_t, sparse_target=None, **kw):
     lm = {} if sparse_target is None else {"landmarks_template": body["sparse"], "landmarks_target": sparse_target}
     return dense_map(body["V"], body["F"], V_t, F_t, basis_template=body["S"], basis_target=B_t, k=K,
@@ -68,9 +83,9 @@ def _sides_kept(body, V_t, F_t, p2p, truth) -> bool:
     return bool(np.all(errors[own_ids] < to_twin))
 
 
-def test_sparse_map_to_a_pose_is_near_identity_and_refinement_helps(body):
+def test_sparse_map_to_a_pose_is_near_identity_and_refinement_helps(body, pose_maps):
     truth = np.arange(len(body["V"]))
-    refined = _run(body, body["Vp"], body["F"], body["T"], sparse_target=body["sparse"])
+    refined = pose_maps["sparse"]
     spectral = _run(body, body["Vp"], body["F"], body["T"], sparse_target=body["sparse"], refine=None)
     e_ref = _mean_error(body["Vp"], body["F"], refined, truth)
     e_spec = _mean_error(body["Vp"], body["F"], spectral, truth)
@@ -80,13 +95,13 @@ def test_sparse_map_to_a_pose_is_near_identity_and_refinement_helps(body):
     assert _sides_kept(body, body["Vp"], body["F"], refined, truth)
 
 
-def test_an_alternative_map_replaces_the_points_map_only_when_it_keeps_the_points_and_is_less_distorted(body):
+def test_an_alternative_map_replaces_the_points_map_only_when_it_keeps_the_points_and_is_less_distorted(body, pose_maps):
     """Sparse mode with ``alternative``: the true map (undistorted, keeps the points) wins over the map made from
     the points; the mirror map (as undistorted on this exactly symmetric body, but it swaps the left and right
     points) does not; an alternative without points is refused."""
     truth = np.arange(len(body["V"]))
     mirror = cKDTree(body["V"]).query(body["V"] * [-1, 1, 1])[1]         # vertex i -> its left/right twin
-    from_points = _run(body, body["Vp"], body["F"], body["T"], sparse_target=body["sparse"])
+    from_points = pose_maps["sparse"]
     assert not np.array_equal(from_points, truth)
     assert np.array_equal(_run(body, body["Vp"], body["F"], body["T"], sparse_target=body["sparse"],
                                alternative=truth), truth)
@@ -108,14 +123,14 @@ def test_automatic_map_to_a_rigidly_moved_pose_keeps_left_and_right(body):
     assert _sides_kept(body, Vm, body["F"], p2p, truth)          # a left/right flip fails this
 
 
-def test_a_target_in_other_units_gets_the_map_of_the_target_as_it_is(body):
+def test_a_target_in_other_units_gets_the_map_of_the_target_as_it_is(body, pose_maps):
     """The target x1024 (exact): the same maps, bit for bit, in both modes. In millimetres (x1000) or kilometres
     (x0.001) and far from the origin: maps as good as the target's as it is. Without ``size_exponent`` /
     ``in_units_of`` the rigid patch fits, the ARAP registration, the functional map's Laplacian term and the
     eigensolver saw a target 1000 times the template's size, and those maps were wrong almost everywhere."""
     truth = np.arange(len(body["V"]))
     for sparse in (None, body["sparse"]):
-        as_is = _run(body, body["Vp"], body["F"], body["T"], sparse_target=sparse)
+        as_is = pose_maps[_mode(sparse)]
         V = body["Vp"] * 1024.0
         assert np.array_equal(_run(body, V, body["F"], _basis(V, body["F"]), sparse_target=sparse), as_is)
         error = _mean_error(body["Vp"], body["F"], as_is, truth)
@@ -163,15 +178,14 @@ def test_in_size_of_scales_to_the_template_area_outside_its_dead_zone(body):
     np.testing.assert_allclose(in_size_of(mm, S).area, S.area, rtol=1e-12)
 
 
-def test_a_target_with_inward_faces_gets_the_map_of_the_target_as_it_is_and_a_warning(body):
+def test_a_target_with_inward_faces_gets_the_map_of_the_target_as_it_is_and_a_warning(body, pose_maps):
     """Reversed faces would swap left and right (orientation decides the chirality): the basis turns them outward,
     says so, and both modes give the map of the target as it is, bit for bit."""
     inward = np.ascontiguousarray(body["F"][:, ::-1])
     with pytest.warns(UserWarning, match="faces point inward"):
         B = _basis(body["Vp"], inward)
     for sparse in (None, body["sparse"]):
-        as_is = _run(body, body["Vp"], body["F"], body["T"], sparse_target=sparse)
-        assert np.array_equal(_run(body, body["Vp"], inward, B, sparse_target=sparse), as_is)
+        assert np.array_equal(_run(body, body["Vp"], inward, B, sparse_target=sparse), pose_maps[_mode(sparse)])
 
 
 def _cut_along_a_seam(V, F):
@@ -180,7 +194,7 @@ def _cut_along_a_seam(V, F):
     return cut_along_a_seam(V, F, centroid_z > np.median(centroid_z))
 
 
-def test_a_mesh_cut_along_a_seam_gets_the_map_of_the_welded_mesh(body):
+def test_a_mesh_cut_along_a_seam_gets_the_map_of_the_welded_mesh(body, pose_maps):
     """Seam vertices repeated with new ids cut the body into a front and a back piece; the basis welds them
     (``repair.coincident_representatives``): a cut target gets the map of the whole target, bit for bit, in both
     modes (a point given on a copy is its original), and on a cut template every copy takes its original's image.
@@ -191,17 +205,16 @@ def test_a_mesh_cut_along_a_seam_gets_the_map_of_the_welded_mesh(body):
     B = _basis(V, F)
     assert B.n == body["T"].n
     for sparse in (None, body["sparse"]):
-        as_is = _run(body, body["Vp"], body["F"], body["T"], sparse_target=sparse)
-        assert np.array_equal(_run(body, V, F, B, sparse_target=sparse), as_is)
+        assert np.array_equal(_run(body, V, F, B, sparse_target=sparse), pose_maps[_mode(sparse)])
     assert np.array_equal(B.to_local(copies), B.to_local(shared))              # a point given on a copy
     Vs, Fs, shared_s, copies_s = _cut_along_a_seam(body["V"], body["F"])
     p2p = dense_map(Vs, Fs, body["Vp"], body["F"], k=K, k_init=K_INIT, refine_options=FAST,
                     basis_template=_basis(Vs, Fs), basis_target=body["T"])
-    assert np.array_equal(p2p[:len(body["V"])], _run(body, body["Vp"], body["F"], body["T"]))
+    assert np.array_equal(p2p[:len(body["V"])], pose_maps["auto"])
     assert np.array_equal(p2p[copies_s], p2p[shared_s])
 
 
-def test_a_target_with_fins_gets_the_map_of_the_target_without_them(body):
+def test_a_target_with_fins_gets_the_map_of_the_target_without_them(body, pose_maps):
     """Triangles standing on 30 edges of the target (non-manifold edges, each with a new apex vertex) are left out
     of its basis (``primitives.without_fins``): the map is the clean target's, bit for bit (on the course pose
     mesh002 with 30 fins two edges tall it was 0.886 the same before, ``python bench/dense_units.py``, last line)."""
@@ -209,8 +222,7 @@ def test_a_target_with_fins_gets_the_map_of_the_target_without_them(body):
     B = _basis(V, F)
     assert B.n == body["T"].n
     for sparse in (None, body["sparse"]):
-        assert np.array_equal(_run(body, V, F, B, sparse_target=sparse),
-                              _run(body, body["Vp"], body["F"], body["T"], sparse_target=sparse))
+        assert np.array_equal(_run(body, V, F, B, sparse_target=sparse), pose_maps[_mode(sparse)])
 
 
 def test_in_units_of_scales_by_a_power_of_two_and_leaves_comparable_sizes_alone(body):
@@ -288,7 +300,7 @@ def test_mesh_basis_round_trips_through_a_dict_of_arrays(body):
         MeshBasis.from_arrays({k: v for k, v in arrays.items() if k != "evecs"})
 
 
-def test_loose_pieces_and_unused_vertices_keep_original_ids(body):
+def test_loose_pieces_and_unused_vertices_keep_original_ids(body, pose_maps):
     """A target with a far unused vertex at 1e30 first and a loose triangle: same map, ids shifted by one."""
     V_t, F_t = body["Vp"], body["F"]
     loose = V_t[:3] + np.array([5.0, 0.0, 0.0])
@@ -297,21 +309,21 @@ def test_loose_pieces_and_unused_vertices_keep_original_ids(body):
     B_dirty = _basis(V_dirty, F_dirty)
     assert B_dirty.n == len(V_t) and B_dirty.n_full == len(V_dirty)
     sparse = body["sparse"]
-    clean = _run(body, V_t, F_t, body["T"], sparse_target=sparse)
+    clean = pose_maps["sparse"]
     dirty = _run(body, V_dirty, F_dirty, B_dirty, sparse_target=sparse + 1)
     assert np.array_equal(dirty, clean + 1)
     with pytest.raises(ValueError, match="largest connected component"):
         _run(body, V_dirty, F_dirty, B_dirty, sparse_target=np.r_[sparse[:-1], len(V_t) + 1])
 
 
-def test_two_hypotheses_give_a_good_automatic_map_and_rank_the_turn_second(body):
+def test_two_hypotheses_give_a_good_automatic_map_and_rank_the_turn_second(body, pose_maps):
     """The automatic mode refines the two best ranked initial maps (at least; decided by
     ``hypotheses_to_refine``) and keeps the less distorted one: on a pose of the same body it is the right map,
     and the second hypothesis is the 180-degree turn (left and right swapped)."""
     from corr_core.correspondence.dense import automatic_hypotheses, map_automatic
 
     truth = np.arange(len(body["V"]))
-    p2p = _run(body, body["Vp"], body["F"], body["T"])
+    p2p = pose_maps["auto"]
     assert _mean_error(body["Vp"], body["F"], p2p, truth) < 0.03
     assert _sides_kept(body, body["Vp"], body["F"], p2p, truth)
     maps = automatic_hypotheses(body["S"], body["T"], 2, k_init=K_INIT, k_end=K)
