@@ -65,5 +65,6 @@ def test_a_dask_worker_reports_repairs_as_one_line(tmp_path):
     script.write_text(WORKER_SCRIPT)
     res = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=180, cwd=tmp_path)
     assert res.returncode == 0, res.stderr
-    assert any(x.startswith("warning: 008.obj: dropped 1 duplicate face (") for x in res.stderr.splitlines())
-    assert "warn_repairs(" not in res.stderr and "UserWarning" not in res.stderr
+    lines = res.stderr.splitlines()
+    assert any(x.startswith("warning: 008.obj: dropped 1 duplicate face (") for x in lines), res.stderr
+    assert "warn_repairs(" not in res.stderr and "UserWarning" not in res.stderr, res.stderr
