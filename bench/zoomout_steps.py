@@ -16,8 +16,13 @@ final ZoomOut runs from the probes' k 60 to 100; at k 60 it has no iteration lef
 template -> test meshes of a folder in the course SCAPE layout (e.g. ``/tmp/scape_remeshed`` from
 ``bench/remesh_scape.py``; ground truth and landmarks as ``bench/correspondence.py`` reads them), code defaults.
 
+With ``--compare BASE OTHER`` (no run): two ``--json`` results of one step on the same targets (e.g. 300 and 150
+patches) side by side per mode: mean and median error of each, the targets OTHER is lower / higher on, its largest
+rise, flips, CPU seconds per map and their ratio OTHER / BASE.
+
 Run:  python bench/zoomout_steps.py [--seeds 10-11] [--poses 4] [--course-settings] [--data DIR --pairs N]
                                     [--steps 2,3,4,6] [--modes sparse,auto] [--n-patches N] [--json OUT]
+      python bench/zoomout_steps.py --compare BASE.json OTHER.json
 """
 from __future__ import annotations
 
@@ -103,7 +108,11 @@ def main(argv=None) -> int:
                     help="refine_extrinsic's patches (default: the settings', 150 at k 60, 300 at k 100)")
     ap.add_argument("--work", default=None, help="folder for the generated data (default: a temporary one)")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--compare", nargs=2, default=None, metavar=("BASE", "OTHER"),
+                    help="print two --json results side by side (no run)")
     args = ap.parse_args(argv)
+    if args.compare:
+        return compare(*args.compare)
 
     import tempfile
 
@@ -175,6 +184,71 @@ def print_summary(rows: list[dict], modes: list[str], steps: list[int]) -> None:
             print(f"{mode:6s} {step:4d} {err.mean():8.5f} {np.median(err):8.5f} {f'{lower} / {higher}':>13s} "
                   f"{sum(r['flipped'] for r in sel):5d} {np.mean([r['seconds'] for r in sel]):6.2f}")
     print(f"({len({r['target'] for r in rows})} targets; lower / higher: than at step {steps[0]})")
+
+
+def compare_rows(base: list[dict], other: list[dict]) -> dict:
+    """Two runs' rows (``--json``'s "rows", one step each) on the targets both have, per mode: {mode: {"targets",
+    "base_mean", "base_median", "other_mean", "other_median", "lower", "higher" (targets where other's error is
+    lower / higher), "largest_rise", "base_flips", "other_flips", "base_seconds", "other_seconds",
+    "cpu_ratio" (other / base)}}. Raises ValueError when a run holds several steps of a mode or no target is
+    shared."""
+    def by_mode(rows: list[dict]) -> dict:
+        out: dict = {}
+        for r in rows:
+            if r["target"] in out.setdefault(r["mode"], {}):
+                raise ValueError(f"{r['target']} {r['mode']}: several rows (several steps?); compare one step")
+            out[r["mode"]][r["target"]] = r
+        return out
+
+    a, b = by_mode(base), by_mode(other)
+    result = {}
+    for mode in (m for m in a if m in b):
+        targets = [t for t in a[mode] if t in b[mode]]
+        if not targets:
+            continue
+        ea = np.array([a[mode][t]["mean_error"] for t in targets])
+        eb = np.array([b[mode][t]["mean_error"] for t in targets])
+        sa = float(np.mean([a[mode][t]["seconds"] for t in targets]))
+        sb = float(np.mean([b[mode][t]["seconds"] for t in targets]))
+        result[mode] = {"targets": len(targets), "base_mean": float(ea.mean()), "base_median": float(np.median(ea)),
+                        "other_mean": float(eb.mean()), "other_median": float(np.median(eb)),
+                        "lower": int(np.sum(eb < ea)), "higher": int(np.sum(eb > ea)),
+                        "largest_rise": float(np.max(eb - ea)),
+                        "base_flips": sum(bool(a[mode][t]["flipped"]) for t in targets),
+                        "other_flips": sum(bool(b[mode][t]["flipped"]) for t in targets),
+                        "base_seconds": sa, "other_seconds": sb, "cpu_ratio": sb / sa if sa > 0 else float("nan")}
+    if not result:
+        raise ValueError("the two runs share no target of a mode")
+    return result
+
+
+def compare(base_path: str, other_path: str) -> int:
+    """Print ``compare_rows`` of two ``--json`` files; 2 with a message for an unreadable or unmatched file."""
+    runs = []
+    for path in (base_path, other_path):
+        try:
+            with open(path) as f:
+                runs.append(json.load(f))
+            runs[-1]["rows"]
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            print(f"{path}: not a --json result of this script ({type(exc).__name__}: {exc})", file=sys.stderr)
+            return 2
+    try:
+        table = compare_rows(runs[0]["rows"], runs[1]["rows"])
+    except ValueError as exc:
+        print(f"{base_path}, {other_path}: {exc}", file=sys.stderr)
+        return 2
+    for path, run in zip((base_path, other_path), runs):
+        print(f"{path}: {run.get('data', '?')}, settings {run.get('settings', '?')}")
+    print(f"{'mode':6s} {'n':>3s} {'base mean (median)':>20s} {'other mean (median)':>20s} {'lower/higher':>13s} "
+          f"{'largest rise':>12s} {'flips':>7s} {'CPU s':>12s} {'ratio':>6s}")
+    for mode, r in table.items():
+        lower_higher, flips = f"{r['lower']} / {r['higher']}", f"{r['base_flips']} / {r['other_flips']}"
+        print(f"{mode:6s} {r['targets']:3d} {r['base_mean']:11.5f} ({r['base_median']:.5f}) "
+              f"{r['other_mean']:11.5f} ({r['other_median']:.5f}) {lower_higher:>13s} {r['largest_rise']:12.5f} "
+              f"{flips:>7s} {r['base_seconds']:5.2f} / {r['other_seconds']:4.2f} {r['cpu_ratio']:6.3f}")
+    print("(lower / higher: targets where OTHER's error is; flips and CPU s: BASE / OTHER; ratio: OTHER / BASE)")
+    return 0
 
 
 if __name__ == "__main__":
