@@ -89,6 +89,31 @@ def run_pyfm(template_mesh, target_path: str, landmarks=None) -> np.ndarray:
     return np.asarray(model.get_p2p(FM=C_zoomout), dtype=np.int64)   # p2p_21: template vertex -> target vertex
 
 
+def scape_layout(data: str, pairs: int | None = None) -> tuple[str, list[str]] | None:
+    """The template's path and the first ``pairs`` (None: all) test meshes' paths, sorted, of a folder in the
+    course SCAPE layout (``meshes/template/mesh000.obj``, ``meshes/test/*.obj``); None, with a line on stderr
+    naming the folder, when either is missing."""
+    template = os.path.join(data, "meshes", "template", "mesh000.obj")
+    tests = sorted(glob.glob(os.path.join(data, "meshes", "test", "*.obj")))[:pairs]
+    if not os.path.isfile(template) or not tests:
+        print(f"no SCAPE data under {data} (expected meshes/template/mesh000.obj and meshes/test/*.obj)",
+              file=sys.stderr)
+        return None
+    return template, tests
+
+
+def read_template(data: str, path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, list, list]:
+    """The template mesh at ``path`` and the landmark files of the folder ``data`` (course SCAPE layout): V (n,3)
+    float, F (m,3) int, the landmark ids (L,) int and names, and the names of the sparse landmarks."""
+    from corr_core.correspondence.landmarks import read_landmarks
+    from corr_core.geometry.mesh_io import load_mesh
+
+    V, F = load_mesh(path)
+    ids, names = read_landmarks(os.path.join(data, "landmark_vids.txt"), n_vertices=len(V))
+    _, sparse_names = read_landmarks(os.path.join(data, "sparse_landmark_vids.txt"), n_vertices=len(V))
+    return V, F, ids, names, sparse_names
+
+
 def true_map(data: str, name: str, n_template: int, n_target: int) -> tuple[np.ndarray, str]:
     """(n_template,) int64 true target vertex of each template vertex and its source: ``ground_truth/<name>.txt``
     under ``data`` when present ("file"), else vertex i <-> vertex i ("identity", the course layout: the same
@@ -301,7 +326,6 @@ def main(argv=None) -> int:
     from corr_core.correspondence.dense import basis as dense_basis
     from corr_core.correspondence.dense import dense_map, measures
     from corr_core.correspondence.dense.transfer import transfer_landmarks
-    from corr_core.correspondence.landmarks import read_landmarks
     from corr_core.geometry.geodesic import GeodesicSolver
     from corr_core.geometry.mesh_io import load_mesh
 
@@ -312,15 +336,11 @@ def main(argv=None) -> int:
     unknown = sorted(set(methods) - set(METHODS))
     if unknown:
         ap.error(f"unknown methods {unknown}; choose from {', '.join(METHODS)}")
-    tpl_path = os.path.join(args.data, "meshes", "template", "mesh000.obj")
-    tests = sorted(glob.glob(os.path.join(args.data, "meshes", "test", "*.obj")))[:args.pairs]
-    if not os.path.isfile(tpl_path) or not tests:
-        print(f"no SCAPE data under {args.data} (expected meshes/template/mesh000.obj and meshes/test/*.obj)",
-              file=sys.stderr)
+    found = scape_layout(args.data, args.pairs)
+    if found is None:
         return 2
-    Vs, Fs = load_mesh(tpl_path)
-    lm_ids, lm_names = read_landmarks(os.path.join(args.data, "landmark_vids.txt"), n_vertices=len(Vs))
-    _, sparse_names = read_landmarks(os.path.join(args.data, "sparse_landmark_vids.txt"), n_vertices=len(Vs))
+    tpl_path, tests = found
+    Vs, Fs, lm_ids, lm_names, sparse_names = read_template(args.data, tpl_path)
 
     t0 = time.process_time()
     S = dense_basis.mesh_basis(Vs, Fs, k=100, name=tpl_path)

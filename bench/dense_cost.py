@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import functools
-import glob
 import os
 import sys
 import time
@@ -136,24 +135,18 @@ def main(argv=None) -> int:
         ap.error(f"--modes: sparse and/or auto, got {args.modes}")
     if args.pairs < 1:
         ap.error(f"--pairs must be >= 1, got {args.pairs}")
-    tpl = os.path.join(args.data, "meshes", "template", "mesh000.obj")
-    tests = sorted(glob.glob(os.path.join(args.data, "meshes", "test", "*.obj")))[:args.pairs]
-    if not os.path.isfile(tpl) or not tests:
-        print(f"no SCAPE data under {args.data} (expected meshes/template/mesh000.obj and meshes/test/*.obj)",
-              file=sys.stderr)
-        return 2
-
-    from bench.correspondence import pair_truth
+    from bench.correspondence import pair_truth, read_template, scape_layout
     from corr_core.correspondence.dense import basis, init
-    from corr_core.correspondence.landmarks import read_landmarks
     from corr_core.geometry.mesh_io import load_mesh
 
-    V_s, F_s = load_mesh(tpl)
+    found = scape_layout(args.data, args.pairs)
+    if found is None:
+        return 2
+    tpl, tests = found
+    V_s, F_s, lm_ids, lm_names, sparse_names = read_template(args.data, tpl)
     S = basis.mesh_basis(V_s, F_s, k=100, name=tpl)
     S.sample_distances(300)                       # the template's work, once: patch geodesics and extremities
     init.cached_extremities(S)
-    lm_ids, lm_names = read_landmarks(os.path.join(args.data, "landmark_vids.txt"), n_vertices=len(V_s))
-    _, sparse_names = read_landmarks(os.path.join(args.data, "sparse_landmark_vids.txt"), n_vertices=len(V_s))
     costs: dict = {m: [] for m in modes}
     targets = []
     for path in tests:
