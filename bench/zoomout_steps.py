@@ -27,7 +27,6 @@ Run:  python bench/zoomout_steps.py [--seeds 10-11] [--poses 4] [--course-settin
 from __future__ import annotations
 
 import argparse
-import glob
 import json
 import os
 import sys
@@ -59,20 +58,18 @@ def map_with_step(S, T, mode: str, step: int, settings: dict, sparse: tuple) -> 
     return map_to_original(S, T, refine.refine_best(S, T, maps, plan).p2p)
 
 
-def scape_targets(data: str, pairs: int | None, settings: dict):
+def scape_targets(data: str, template: str, tests: list[str], settings: dict):
     """Yield (template basis, template landmark ids (L,), name, V, F, truth (n_template,) int, the target's
-    landmark ids (L,), sparse: (template ids (5,), target ids (5,))) for every test mesh of a folder in the course
-    SCAPE layout, read as ``bench/correspondence.py`` does; the template basis (at ``settings``) made once."""
-    from bench.correspondence import pair_truth
+    landmark ids (L,), sparse: (template ids (5,), target ids (5,))) for every test mesh path of ``tests``, in a
+    folder in the course SCAPE layout with the template at ``template`` (``bench.correspondence.scape_layout``),
+    read as ``bench/correspondence.py`` does; the template basis (at ``settings``) made once."""
+    from bench.correspondence import pair_truth, read_template
     from corr_core.correspondence.dense import basis
-    from corr_core.correspondence.landmarks import read_landmarks
     from corr_core.geometry.mesh_io import load_mesh
 
-    V_s, F_s = load_mesh(os.path.join(data, "meshes", "template", "mesh000.obj"))
+    V_s, F_s, lm_ids, lm_names, sparse_names = read_template(data, template)
     S = basis.mesh_basis(V_s, F_s, k=settings["k"], n_samples=settings["n_samples"], name="template")
-    lm_ids, lm_names = read_landmarks(os.path.join(data, "landmark_vids.txt"), n_vertices=len(V_s))
-    _, sparse_names = read_landmarks(os.path.join(data, "sparse_landmark_vids.txt"), n_vertices=len(V_s))
-    for path in sorted(glob.glob(os.path.join(data, "meshes", "test", "*.obj")))[:pairs]:
+    for path in tests:
         name = os.path.splitext(os.path.basename(path))[0]
         V, F = load_mesh(path)
         given = pair_truth(data, name, lm_names, lm_ids, sparse_names, len(V_s), len(V))
@@ -116,6 +113,7 @@ def main(argv=None) -> int:
 
     import tempfile
 
+    from bench.correspondence import scape_layout
     from bench.dense_hypotheses import SETTINGS, seed_range
     from corr_core.correspondence.dense import basis, measures
     from corr_core.correspondence.dense.transfer import transfer_landmarks
@@ -132,15 +130,14 @@ def main(argv=None) -> int:
         ap.error(f"--modes: sparse and/or auto, got {args.modes}")
     if args.n_patches is not None and args.n_patches < 1:
         ap.error(f"--n-patches must be >= 1, got {args.n_patches}")
-    if args.data and not os.path.isfile(os.path.join(args.data, "meshes", "template", "mesh000.obj")):
-        print(f"no SCAPE data under {args.data} (expected meshes/template/mesh000.obj and meshes/test/*.obj)",
-              file=sys.stderr)
+    found = scape_layout(args.data, args.pairs) if args.data else None
+    if args.data and found is None:
         return 2
     settings = dict(CODE_SETTINGS if args.data or args.course_settings else SETTINGS)
     if args.n_patches is not None:
         settings["n_patches"] = args.n_patches
     if args.data:
-        targets = scape_targets(args.data, args.pairs, settings)
+        targets = scape_targets(args.data, *found, settings)
     else:
         work = args.work or tempfile.mkdtemp(prefix="zoomout_steps_")
         targets = generated_pairs(work, seed_range(args.seeds), args.poses, settings)

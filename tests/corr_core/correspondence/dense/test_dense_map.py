@@ -95,7 +95,8 @@ def test_sparse_map_to_a_pose_is_near_identity_and_refinement_helps(body, pose_m
     assert _sides_kept(body, body["Vp"], body["F"], refined, truth)
 
 
-def test_an_alternative_map_replaces_the_points_map_only_when_it_keeps_the_points_and_is_less_distorted(body, pose_maps):
+def test_an_alternative_map_replaces_the_points_map_only_when_it_keeps_the_points_and_is_less_distorted(
+        body, pose_maps):
     """Sparse mode with ``alternative``: the true map (undistorted, keeps the points) wins over the map made from
     the points; the mirror map (as undistorted on this exactly symmetric body, but it swaps the left and right
     points) does not; an alternative without points is refused."""
