@@ -55,8 +55,9 @@ def dense_basis(mesh, *, k: int = 100, n_samples: int = 2000) -> dict:
 def dense_template(template_basis, *, n_patches: int = 300) -> dict:
     """What every target's tasks need of the template, computed once instead of once per target:
     ``corr.dense_basis``'s arrays plus "sample_distances" ((n_patches, n) float / sqrt(area): geodesics from the
-    patch centres of ``refine_extrinsic``) and "extremities" ((p,) int local ids: ``init.extremities``, the
-    feature points of ``map_automatic``)."""
+    patch centres of ``refine_extrinsic``), "extremities" ((p,) int local ids: ``init.extremities``, the
+    feature points of ``map_automatic``) and their geodesics ("point_distance_ids" / "point_distance_rows":
+    ``MeshBasis.point_distances``)."""
     S = _basis(template_basis, "template")
     S.sample_distances(n_patches)
     dense.init.cached_extremities(S)

@@ -29,6 +29,10 @@ from corr_core.geometry.primitives import face_areas, face_normals, vertex_norma
 from corr_core.geometry.repair import coincident_representatives, orient_outward
 from corr_core.geometry.sampling import farthest_point_samples
 
+# Rows ``MeshBasis.point_distances`` keeps per basis: a pair needs a dozen (the extremities or given points of
+# both meshes); the limit bounds a long-lived template's memory (32 rows of n float64) whatever it is asked.
+MAX_KEPT_DISTANCE_ROWS = 32
+
 
 @dataclass
 class MeshBasis:
@@ -148,6 +152,42 @@ class MeshBasis:
         """Geodesic distances / sqrt(area) from each source vertex: (s,) int -> (s, n) float."""
         return self.solver().distances(sources) / self.scale
 
+    def point_distances(self, points) -> np.ndarray:
+        """``distances(points)``, each vertex's row computed once and then kept (read-only): (p,) int -> (p, n) float.
+
+        For the few feature points a pair asks for more than once (a template's extremities or given points,
+        reused for every target; a target's extremities, found and then used). Each row is one heat-method solve
+        from its own vertex, so a kept row is the one ``distances`` gives, bit for bit. At most
+        ``MAX_KEPT_DISTANCE_ROWS`` rows are kept per basis; later ones are computed every time."""
+        points = np.atleast_1d(np.asarray(points, dtype=np.int64))
+        rows = self.cached("point_distance_rows", dict)
+        missing = [int(v) for v in dict.fromkeys(points.tolist()) if v not in rows]
+        if missing:
+            fresh = self.distances(missing)
+            for v, row in zip(missing, fresh):
+                if len(rows) < MAX_KEPT_DISTANCE_ROWS:
+                    row.setflags(write=False)
+                    rows[v] = row
+            if any(v not in rows for v in missing):                # over the limit: no row kept for these
+                found = dict(zip(missing, fresh))
+                return np.stack([rows[v] if v in rows else found[v] for v in points.tolist()])
+        return np.stack([rows[v] for v in points.tolist()]) if len(points) else np.empty((0, self.n))
+
+    def face_frames(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per-face geometry of piecewise-linear gradients, made on first use and then shared (read-only): unit
+        face normals N (m,3) float and corner weights W (3, m, 3) float, W[c] = (N x e_c) / (2 area) with e_c the
+        edge opposite corner c, so that the gradient of vertex values f in each face is sum_c f[F[:, c]] W[c]
+        (``face_gradients``), in 1 / length units."""
+        def make() -> tuple[np.ndarray, np.ndarray]:
+            N = face_normals(self.V, self.F)
+            twice_area = 2.0 * face_areas(self.V, self.F)
+            W = np.stack([np.cross(N, self.V[self.F[:, (c + 2) % 3]] - self.V[self.F[:, (c + 1) % 3]])
+                          / np.maximum(twice_area, 1e-300)[:, None] for c in range(3)])
+            N.setflags(write=False)
+            W.setflags(write=False)
+            return N, W
+        return self.cached("face_frames", make)
+
     def sample_distances(self, m: int) -> np.ndarray:
         """Distances / sqrt(area) from the first ``m`` samples: (m, n) float, cached (the template's are reused
         for every target)."""
@@ -192,13 +232,18 @@ class MeshBasis:
 
     def to_arrays(self) -> dict:
         """The basis as a plain dict of numpy arrays (``area`` and ``n_full`` as 0-d arrays; the template's cached
-        sample distances as ``sample_distances`` and its ``init.extremities`` as ``extremities`` when computed).
+        sample distances as ``sample_distances``, its ``init.extremities`` as ``extremities`` and the distance rows
+        ``point_distances`` kept as ``point_distance_ids`` (p,) int / ``point_distance_rows`` (p, n) when computed).
         ``MeshBasis.from_arrays`` inverts it exactly."""
         out = {key: np.asarray(getattr(self, key)) for key in self._ARRAY_KEYS}
         if self._sample_distances is not None:
             out["sample_distances"] = np.asarray(self._sample_distances)
         if "extremities" in self._derived:
             out["extremities"] = np.asarray(self._derived["extremities"])
+        rows = self._derived.get("point_distance_rows")
+        if rows:
+            out["point_distance_ids"] = np.array(list(rows), dtype=np.int64)
+            out["point_distance_rows"] = np.stack(list(rows.values()))
         if self.aliases is not None:
             out["aliases"] = np.asarray(self.aliases)
         return out
@@ -218,6 +263,10 @@ class MeshBasis:
             basis._sample_distances = np.asarray(arrays["sample_distances"])
         if "extremities" in arrays:
             basis._derived["extremities"] = np.asarray(arrays["extremities"], dtype=np.int64)
+        if "point_distance_ids" in arrays:
+            rows = np.array(arrays["point_distance_rows"], dtype=np.float64)
+            rows.setflags(write=False)
+            basis._derived["point_distance_rows"] = dict(zip(np.asarray(arrays["point_distance_ids"]).tolist(), rows))
         return basis
 
     def __getstate__(self):
@@ -418,12 +467,9 @@ def face_gradients(basis: MeshBasis, funcs: np.ndarray) -> np.ndarray:
     Args: basis: the mesh; funcs: (n, q) float vertex values.
     Returns: (m, 3, q) float, gradient in each face (units: function per length).
     """
-    V, F = basis.V, basis.F
-    N = face_normals(V, F)                                        # (m,3) unit
-    twice_area = 2.0 * face_areas(V, F)
+    F = basis.F
+    _, W = basis.face_frames()                                    # W[c] = (n x e_c) / (2A), e_c opposite corner c
     grad = np.zeros((len(F), 3, funcs.shape[1]))
     for c in range(3):                                            # grad f = sum_c f_c (n x e_c) / (2A)
-        e = V[F[:, (c + 2) % 3]] - V[F[:, (c + 1) % 3]]           # edge opposite corner c, along the face
-        w = np.cross(N, e) / np.maximum(twice_area, 1e-300)[:, None]
-        grad += w[:, :, None] * funcs[F[:, c]][:, None, :]
+        grad += W[c][:, :, None] * funcs[F[:, c]][:, None, :]
     return grad

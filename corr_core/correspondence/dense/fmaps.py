@@ -263,7 +263,7 @@ def chirality_functions(basis: MeshBasis, dist: np.ndarray) -> np.ndarray:
 
     G = face_gradients(basis, dist)                                       # (m,3,L)
     G /= np.maximum(np.linalg.norm(G, axis=1, keepdims=True), 1e-12)
-    N = face_normals(basis.V, basis.F)
+    N, _ = basis.face_frames()
     pairs = list(combinations(range(dist.shape[1]), 2))
     i, j = np.array(pairs).T
     # <n, g_i x g_j> = g_j . (n x g_i): one cross product per field instead of one per pair
@@ -275,10 +275,17 @@ def chirality_functions(basis: MeshBasis, dist: np.ndarray) -> np.ndarray:
 
 def _face_to_vertex_mean(basis: MeshBasis, face_values: np.ndarray) -> np.ndarray:
     """Area-weighted mean of face values (m, q) over the faces around each vertex -> (n, q) float."""
+    incidence, w = basis.cached("face_to_vertex_mean", lambda: _area_incidence(basis))
+    return (incidence @ face_values) / np.maximum(w, 1e-300)[:, None]
+
+
+def _area_incidence(basis: MeshBasis):
+    """Vertex-face incidence weighted by face area, (n, m) sparse csr, and its row sums (n,) float."""
     import scipy.sparse as sp
 
     A = face_areas(basis.V, basis.F)
     m = len(basis.F)
     incidence = sp.csr_matrix((np.repeat(A, 3), (basis.F.ravel(), np.repeat(np.arange(m), 3))), shape=(basis.n, m))
     w = np.asarray(incidence.sum(axis=1)).ravel()
-    return (incidence @ face_values) / np.maximum(w, 1e-300)[:, None]
+    w.setflags(write=False)
+    return incidence, w

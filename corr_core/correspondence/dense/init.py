@@ -82,9 +82,31 @@ def point_features(basis: MeshBasis, points: np.ndarray, *, chirality_weight: fl
         raise ValueError(f"need at least 2 points, got {points.shape}")
     if points.min() < 0 or points.max() >= basis.n:
         raise ValueError(f"point ids must be in 0..{basis.n - 1}, got {points.min()}..{points.max()}")
-    d = (basis.distances(points) if distances is None else np.asarray(distances)).T
+    d = (basis.point_distances(points) if distances is None else np.asarray(distances)).T
     local = [np.exp(-(d / s) ** 2) for s in scales]
     return np.concatenate([d] + local + [chirality_weight * fmaps.chirality_functions(basis, d)], axis=1)
+
+
+# ``kept_point_features`` keeps this many feature sets per basis: the automatic mode asks a template for one per
+# assigned subset of its extremities (one when it has no more than the target; at most C(7, 3) = 35), the sparse
+# mode for one per landmark set.
+MAX_KEPT_FEATURE_SETS = 64
+
+
+def kept_point_features(basis: MeshBasis, points: np.ndarray, *,
+                        chirality_weight: float = CHIRALITY_WEIGHT) -> np.ndarray:
+    """``point_features(basis, points)`` (default scales, distances from ``basis.point_distances``), computed once
+    per basis, points and weight, then kept read-only (up to ``MAX_KEPT_FEATURE_SETS``): a template's features are
+    the same for every target. Returns (n, ...) float as ``point_features``."""
+    kept = basis.cached("point_features", dict)
+    key = (tuple(np.asarray(points, dtype=np.int64).tolist()), float(chirality_weight))
+    if key in kept:
+        return kept[key]
+    features = point_features(basis, np.asarray(points, dtype=np.int64), chirality_weight=chirality_weight)
+    if len(kept) < MAX_KEPT_FEATURE_SETS:
+        features.setflags(write=False)
+        kept[key] = features
+    return features
 
 
 def fmap_from_points(source: MeshBasis, target: MeshBasis, points_source: np.ndarray, points_target: np.ndarray, *,
@@ -97,7 +119,7 @@ def fmap_from_points(source: MeshBasis, target: MeshBasis, points_source: np.nda
     if len(points_source) != len(points_target):
         raise ValueError(f"{len(points_source)} template points but {len(points_target)} target points")
     target = in_size_of(target, source)                 # at the template's size (basis.in_size_of)
-    FS, FT = features if features is not None else (point_features(source, points_source),
+    FS, FT = features if features is not None else (kept_point_features(source, points_source),
                                                     point_features(target, points_target))
     k = int(min(k, source.evecs.shape[1], target.evecs.shape[1]))
     A_S, A_T = fmaps.project(source, FS, k), fmaps.project(target, FT, k)
@@ -184,7 +206,7 @@ def extremities(basis: MeshBasis, *, max_points: int = 6, radius: float = 0.25, 
         if not is_max[v] or nearest[v] < radius:
             continue
         taken.append(int(v))
-        nearest = np.minimum(nearest, basis.distances([v])[0])
+        nearest = np.minimum(nearest, basis.point_distances([v])[0])
     return np.array(taken, dtype=np.int64)
 
 
@@ -399,14 +421,14 @@ def automatic_hypotheses(source: MeshBasis, target: MeshBasis, n: int | None = N
     if few:
         raise ValueError(f"the automatic initialisation needs at least 3 feature points (extremities) on each mesh; "
                          f"{' and '.join(few)} (a mesh this small or this round has no distinct extremities)")
-    Gs, Gt = source.distances(Ps), target.distances(Pt)          # (p, n_s), (q, n_t), reused per candidate
+    Gs, Gt = source.point_distances(Ps), target.point_distances(Pt)      # (p, n_s), (q, n_t): kept on the bases
     Ds, Dt = 0.5 * (Gs[:, Ps] + Gs[:, Ps].T), 0.5 * (Gt[:, Pt] + Gt[:, Pt].T)
     candidates = ranked_assignments(Ds, Dt, keep=keep, scale_invariant=True)
     info = {"points_source": Ps, "points_target": Pt, "candidates": []}
     for s, t, cost in candidates:
         # the target's distance fields in the template's units (same mean distance between the assigned points)
         ratio = Ds[np.ix_(s, s)].sum() / max(Dt[np.ix_(t, t)].sum(), 1e-300)
-        FS = point_features(source, Ps[s], distances=Gs[s], chirality_weight=chirality_weight)
+        FS = kept_point_features(source, Ps[s], chirality_weight=chirality_weight)    # from Gs's rows
         FT = point_features(target, Pt[t], distances=ratio * Gt[t], chirality_weight=chirality_weight)
         n_pairs = len(s) * (len(s) - 1) // 2                     # the last columns: the chirality functions
         C, p2p = map_from_points(source, target, source.vids[Ps[s]], target.vids[Pt[t]], k_init=k_init,

@@ -1,4 +1,5 @@
-"""The faster numerical paths of the dense basis and functional maps give the answers of the plain ones:
+"""The faster numerical paths of the dense basis and functional maps give the answers of the plain ones (kept
+distance rows, face frames and template point features among them):
 basis eigenpairs (mid-band shift with its fallback), farthest-point samples (buffered Euclidean path), float32 nearest rows (brute force and by cells), the normal
 equations of fmap_from_p2p, the row-decoupled functional-map fit, ZoomOut's sample-then-vertex schedule, and the
 benchmark's CPU-time ratios."""
@@ -208,3 +209,71 @@ def test_bench_prints_each_project_method_over_each_pyfm_mode():
     lines = time_ratio_lines(summary)
     assert "dense_auto / pyfm_none: 0.500  (above 1/3)" in "\n".join(lines)
     assert time_ratio_lines({"dense_sparse": {"seconds": 1.0}}) == []
+
+
+def test_point_distances_are_the_solved_rows_kept_once(ellipsoid, monkeypatch):
+    """``point_distances`` gives ``distances``' rows bit for bit (in the order asked, repeats included), solves each
+    vertex once, keeps them read-only, and past ``MAX_KEPT_DISTANCE_ROWS`` still answers right without keeping."""
+    B = mesh_basis(*ellipsoid, k=8, n_samples=50)
+    want = B.distances([7, 3, 7, 11])
+    solved = []
+    plain = B.distances
+    monkeypatch.setattr(B, "distances", lambda s: (solved.extend(np.atleast_1d(s).tolist()), plain(s))[1])
+    assert np.array_equal(B.point_distances([7, 3, 7, 11]), want)
+    assert np.array_equal(B.point_distances([11, 3]), want[[3, 1]])
+    assert sorted(solved) == [3, 7, 11]                        # each vertex solved once, repeats and reuse included
+    assert not B._derived["point_distance_rows"][3].flags.writeable
+    monkeypatch.setattr(dense_basis, "MAX_KEPT_DISTANCE_ROWS", 4)
+    assert np.array_equal(B.point_distances([20, 21, 7]), plain([20, 21, 7]))
+    assert len(B._derived["point_distance_rows"]) == 4
+
+
+def test_kept_distance_rows_travel_with_the_basis_arrays(ellipsoid, monkeypatch):
+    """``to_arrays`` carries the kept rows and ``from_arrays`` serves them without solving again."""
+    B = mesh_basis(*ellipsoid, k=8, n_samples=50)
+    rows = B.point_distances([5, 9])
+    back = dense_basis.MeshBasis.from_arrays(B.to_arrays())
+    monkeypatch.setattr(back, "distances", lambda s: pytest.fail(f"solved {s} again"))
+    assert np.array_equal(back.point_distances([9, 5]), rows[::-1])
+    assert "point_distance_ids" not in mesh_basis(*ellipsoid, k=8, n_samples=50).to_arrays()
+
+
+def test_face_gradients_from_the_kept_frames_are_the_plain_formula(ellipsoid):
+    """The gradient of vertex values from ``MeshBasis.face_frames`` equals the per-face formula sum_c f_c (n x e_c)
+    / (2 A), bit for bit, and the gradient of a linear function is that function's direction in the face plane."""
+    from corr_core.correspondence.dense.basis import face_gradients
+    from corr_core.geometry.primitives import face_normals
+
+    B = mesh_basis(*ellipsoid, k=8, n_samples=50)
+    V, F = B.V, B.F
+    f = np.stack([V @ np.array([1.0, -2.0, 0.5]), np.sin(3 * V[:, 0])], axis=1)
+    N = face_normals(V, F)
+    twice_area = 2.0 * face_areas(V, F)
+    plain = np.zeros((len(F), 3, 2))
+    for c in range(3):
+        w = np.cross(N, V[F[:, (c + 2) % 3]] - V[F[:, (c + 1) % 3]]) / np.maximum(twice_area, 1e-300)[:, None]
+        plain += w[:, :, None] * f[F[:, c]][:, None, :]
+    assert np.array_equal(face_gradients(B, f), plain)
+    g = np.array([1.0, -2.0, 0.5])
+    in_plane = g - (N @ g)[:, None] * N
+    assert np.allclose(face_gradients(B, f)[:, :, 0], in_plane, atol=1e-9)
+    assert face_gradients(B, f[:, :1]).shape == (len(F), 3, 1)
+
+
+def test_kept_point_features_are_point_features_once_per_points(ellipsoid, monkeypatch):
+    """A template's point features are computed once per points and weight, read-only, equal to ``point_features``;
+    past ``MAX_KEPT_FEATURE_SETS`` they are computed each time."""
+    from corr_core.correspondence.dense import init
+
+    B = mesh_basis(*ellipsoid, k=8, n_samples=50)
+    points = B.samples[:4]
+    want = init.point_features(mesh_basis(*ellipsoid, k=8, n_samples=50), points)
+    first = init.kept_point_features(B, points)
+    assert np.array_equal(first, want) and not first.flags.writeable
+    assert init.kept_point_features(B, points) is first
+    assert not np.array_equal(init.kept_point_features(B, points, chirality_weight=0.5), first)
+    assert not np.array_equal(init.kept_point_features(B, points[::-1]), first)
+    monkeypatch.setattr(init, "MAX_KEPT_FEATURE_SETS", 3)
+    extra = init.kept_point_features(B, B.samples[4:7])
+    assert np.array_equal(extra, init.point_features(B, B.samples[4:7]))
+    assert init.kept_point_features(B, B.samples[4:7]) is not extra
