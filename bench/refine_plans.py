@@ -11,6 +11,10 @@ samples. The summary, per plan: mean and median error, targets lower / higher th
 its ``map_distortion`` is lower than the first plan's, CPU seconds per target of its refinement.
 Settings as ``bench/dense_hypotheses.py`` (k 60, 1000 samples, 150 patches: the bodies and default pipelines').
 
+A plan written with the suffix ":points" (e.g. "extrinsic+spectral+deform:points") is refined with the sparse points
+held: every step keeps them and the registration is constrained by them (``refine.refine_map(points=)``, as
+``dense_map`` refines a map from given points).
+
 Run:  python bench/refine_plans.py [--seeds 10-13] [--poses 6]
           [--plans extrinsic+spectral+deform,extrinsic+deform] [--json OUT]
       (an existing --json file is resumed: targets already in it are not run again)
@@ -36,24 +40,28 @@ from bench.dense_hypotheses import (SETTINGS, generated_targets, generated_templ
                                    seed_range)
 
 PLANS = ("extrinsic+spectral+deform", "extrinsic+deform")
+HELD = ":points"        # a plan written with this suffix refines with the sparse points held (refine_map(points=))
 
 
-def refine_plans(S, T, start: np.ndarray, plans: list[str]) -> dict[str, tuple[np.ndarray, float]]:
+def refine_plans(S, T, start: np.ndarray, plans: list[str], points=None) -> dict[str, tuple[np.ndarray, float]]:
     """{plan: (refined (n_s,) int map, CPU s)}: each plan's steps run from ``start``, a prefix another plan already
-    ran reused (its seconds counted again)."""
+    ran reused (its seconds counted again); a plan ending in ``HELD`` gets ``points`` (template, target local ids)
+    as the given points every step keeps (``refine.refine_map(points=)``)."""
     from corr_core.correspondence.dense import refine
 
-    done: dict[tuple, tuple[np.ndarray, float]] = {(): (start, 0.0)}
+    done: dict[tuple, tuple[np.ndarray, float]] = {(False,): (start, 0.0), (True,): (start, 0.0)}
     out = {}
     for plan in plans:
-        steps = plan.split("+")
-        cut = max(i for i in range(len(steps) + 1) if tuple(steps[:i]) in done)
-        p2p, seconds = done[tuple(steps[:cut])]
+        held = plan.endswith(HELD)
+        steps = plan.removesuffix(HELD).split("+")
+        cut = max(i for i in range(len(steps) + 1) if (held, *steps[:i]) in done)
+        p2p, seconds = done[(held, *steps[:cut])]
         for i in range(cut, len(steps)):
             t0 = time.process_time()
-            p2p = refine.refine_map(S, T, p2p, steps[i], {"extrinsic": {"n_patches": SETTINGS["n_patches"]}})
+            p2p = refine.refine_map(S, T, p2p, steps[i], {"extrinsic": {"n_patches": SETTINGS["n_patches"]}},
+                                    points=points if held else None)
             seconds += time.process_time() - t0
-            done[tuple(steps[:i + 1])] = (p2p, seconds)
+            done[(held, *steps[:i + 1])] = (p2p, seconds)
         out[plan] = (p2p, seconds)
     return out
 
@@ -65,7 +73,8 @@ def score(S, T, V_t, F_t, truth, sparse, plans: list[str]) -> dict:
     from corr_core.geometry.geodesic import GeodesicSolver
 
     C, p2p = init.map_from_points(S, T, sparse, truth[sparse], k_init=SETTINGS["k_init"], k_end=SETTINGS["k"])
-    refined = refine_plans(S, T, upsample_spectral(S, T, C, p2p), plans)
+    points = (S.to_local(sparse), T.to_local(truth[sparse]))
+    refined = refine_plans(S, T, upsample_spectral(S, T, C, p2p), plans, points)
     errors = measures.dense_errors(V_t, F_t, {p: map_to_original(S, T, m) for p, (m, _) in refined.items()}, truth,
                                    vertices=S.vids[S.samples[:SETTINGS["eval_vertices"]]],
                                    solver=GeodesicSolver(V_t, F_t))
@@ -100,7 +109,7 @@ def main(argv=None) -> int:
 
     plans = [p.strip() for p in args.plans.split(",") if p.strip()]
     for p in plans:
-        refine_plan(p)                                     # a misspelt step fails before any work
+        refine_plan(p.removesuffix(HELD))                  # a misspelt step fails before any work
     seeds = seed_range(args.seeds)
     work = args.work or tempfile.mkdtemp(prefix="refine_plans_")
     results = [r for r in resumed_results(args.json, seeds) if set(plans) <= set(r["plans"])]

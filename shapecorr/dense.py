@@ -26,7 +26,7 @@ import numpy as np
 from corr_core import plotting
 from corr_core.correspondence import dense, measures
 from corr_core.correspondence.dense import measures as dense_measures_lib
-from corr_core.correspondence.dense.basis import MeshBasis, map_to_original
+from corr_core.correspondence.dense.basis import MeshBasis, map_to_local, map_to_original
 from corr_core.correspondence.dense.refine import LOW_CONFIDENCE
 from corr_core.correspondence.landmarks import read_landmarks, write_landmarks
 from corr_core.geometry.geodesic import GeodesicSolver
@@ -150,7 +150,9 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
     ``map_distortion`` of every hypothesis after the last step it got, "dropped": (h,) bool, dropped before the
     last step, "confidence": float in [0, 1], no ground truth needed (several hypotheses: ``BestMap.confidence``,
     the kept map's distortion margin over the runner-up; given points: ``points_agreement``, the fraction of them
-    the map keeps; absent with a single automatic hypothesis)} or ``skips.skipped(why)``. With given points and an
+    the kept map kept before the refinement held them -- the starting map made from them, or the alternative as
+    given: points that no near-isometric map keeps all of, e.g. left and right swapped, score low; absent with a
+    single automatic hypothesis)} or ``skips.skipped(why)``. With given points and an
     ``alternative`` (another ``corr.dense_refine`` result of the same pair, e.g. dense_auto's), that map is kept
     instead when it keeps the given points and is less distorted (``refine.best_with_points``; "hypothesis":
     "alternative"): points never make a map worse."""
@@ -163,14 +165,17 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
     maps = [dense.upsample_spectral(S, T, np.asarray(C), np.asarray(p2p)) for C, p2p in starts]
     plan = _refine_plan(refine=refine, n_patches=n_patches, patch_size=patch_size, rounds=rounds,
                         icp_iterations=icp_iterations, stiffness=stiffness)
-    best = dense.refine_best(S, T, maps, plan)
+    points = np.asarray(initial["points"]) if "points" in initial else None
+    best = dense.refine_best(S, T, maps, plan, points=None if points is None else tuple(points))
     hypothesis = best.index
-    if "points" in initial:
-        points = np.asarray(initial["points"])
+    if points is not None:
+        unheld = maps[0]                # the kept map before the refinement held the points (it always keeps them)
         if holds(alternative, "vertex_map"):
-            best = dense.with_alternative(S, T, best, alternative["vertex_map"], *points)
+            best = dense.with_alternative(S, T, best, alternative["vertex_map"], *points, refine=plan)
             hypothesis = "alternative" if best.index == 1 else hypothesis
-        confidence = dense.points_agreement(T, best.p2p, *points)
+            if best.index == 1:
+                unheld = map_to_local(S, T, alternative["vertex_map"])
+        confidence = dense.points_agreement(T, unheld, *points)
     else:
         confidence = best.confidence if len(maps) > 1 else None
     out = {"vertex_map": map_to_original(S, T, best.p2p), "hypothesis": hypothesis,
@@ -335,7 +340,7 @@ def _low_confidence_warnings(dense_summary: dict) -> list[str]:
         for m, row in summary.get("per_mesh", {}).items():
             c = row["confidence"]
             if c is not None and c < LOW_CONFIDENCE:
-                why = ("the map keeps few of the given points" if method == "dense_sparse" else
+                why = ("few of the given points agree with the map made from them" if method == "dense_sparse" else
                        "another starting map (e.g. the shape turned by 180 degrees or mirrored) refined almost as well")
                 out.append(f"{method} map of {m} has low confidence {c:.2f} ({why}): look at "
                            f"dense_maps/{method}/{m}.ply before using it")

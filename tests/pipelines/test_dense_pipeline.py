@@ -368,3 +368,55 @@ def test_dense_auto_init_on_a_two_triangle_mesh_names_the_file(tmp_path):
     msg = str(err.value)
     assert msg.startswith("flat.obj (item scan_7)") and "the target has 2" in msg and "template" in msg
     assert "sparse" in msg                                   # what to do
+
+
+def _vid_names(path) -> dict:
+    """{name: vertex id} of a ``vid,Name`` landmark file."""
+    ids, names = read_landmarks(path)
+    return dict(zip(names, ids.tolist()))
+
+
+def test_dense_sparse_sends_the_given_points_where_they_are_given(data, first_run):
+    """The stage's map from the sparse points keeps them: each template point goes to the target's point of the
+    same name (mesh001: the shared file; mesh002, another triangulation: its own landmarks/mesh002.txt), unless
+    the automatic map was kept instead (``hypothesis`` "alternative")."""
+    root = data["root"]
+    template = _vid_names(root / "sparse_landmark_vids.txt")
+    names = list(template)
+    checked = 0
+    for mesh, target_file in (("mesh001", root / "sparse_landmark_vids.txt"),
+                              ("mesh002", root / "landmarks" / "mesh002.txt")):
+        result = _result(data, root, "dense_sparse", mesh)
+        if result["hypothesis"] == "alternative":
+            continue
+        target = _vid_names(target_file)
+        vertex_map = np.asarray(result["vertex_map"])
+        assert [int(vertex_map[template[n]]) for n in names] == [target[n] for n in names], mesh
+        checked += 1
+    assert checked, "both maps were the automatic alternative: nothing checked"
+
+
+def test_dense_sparse_confidence_reads_the_points_before_they_are_held():
+    """``corr.dense_refine`` holds the given points (its map sends each exactly where it is given), so its
+    confidence reads the starting map made from them: 1 for the points of a pose, lower when the head's point is
+    given on the belly, which no near-isometric map keeps with the other four."""
+    from corr_core.correspondence.dense import map_from_points, mesh_basis
+    from corr_core.generate import humanoid
+    from shapecorr.dense import dense_refine
+
+    V, F = humanoid.make_humanoid_rest(grid_step=0.05)
+    W, _ = humanoid.skinning_weights(V, F)
+    Vp = humanoid.pose_mesh(V, W, humanoid.random_pose(np.random.default_rng(2)))
+    S, T = mesh_basis(V, F, k=30, n_samples=400), mesh_basis(Vp, F, k=30, n_samples=400)
+    lms = humanoid.landmark_vertices(V)
+    ids = np.array([lms[n] for n in humanoid.SPARSE_LANDMARK_NAMES])
+    belly = ids.copy()
+    belly[-1] = int(np.argmin(np.linalg.norm(Vp - Vp.mean(axis=0), axis=1)))      # "Vertex" (the head) misplaced
+    confidence = {}
+    for name, target_ids in (("pose", ids), ("misplaced", belly)):
+        C, p2p = map_from_points(S, T, ids, target_ids, k_init=15, k_end=30)
+        initial = {"C": C, "p2p_samples": p2p, "mode": "sparse", "points": np.stack([ids, target_ids])}
+        out = dense_refine(S.to_arrays(), T.to_arrays(), initial, refine="extrinsic+deform", n_patches=60)
+        assert np.array_equal(out["vertex_map"][ids], target_ids), name
+        confidence[name] = out["confidence"]
+    assert confidence["pose"] == 1.0 and confidence["misplaced"] < 1.0, confidence

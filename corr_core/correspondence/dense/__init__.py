@@ -51,7 +51,9 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
         V_template: (n_s,3) float, F_template: (m_s,3) int; V_target: (n_t,3), F_target: (m_t,3) -- any vertex
             counts and triangulations; faces consistently oriented (outward normals on both).
         landmarks_template, landmarks_target: (L,) int corresponding vertex ids (L >= 3, e.g. the 5 sparse
-            landmarks) or both None for the automatic map (no point needed on either mesh).
+            landmarks) or both None for the automatic map (no point needed on either mesh). Given points start
+            the map and constrain its refinement (the registration holds them), and the map sends each template
+            point to its target point (the first pair of a repeated template id).
         k: final spectral basis size (ZoomOut end); k_init: size of the initial functional map.
         refine: pointwise steps after ZoomOut, applied in the order named (``refine.refine_plan``):
             "extrinsic+spectral+deform" (default: ``refine_extrinsic``, ``refine_spectral``, then
@@ -96,8 +98,9 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
                              f"{lt.shape}")
         starts = [map_from_points(S, T, ls, lt, k_init=k_init, k_end=k)]
     maps = [upsample_spectral(S, T, C, p2p_samples) for C, p2p_samples in starts]
-    best = refine_best(S, T, maps, refine)
+    points = None if landmarks_template is None else (S.to_local(ls, what="template landmark"),
+                                                      T.to_local(lt, what="target landmark"))
+    best = refine_best(S, T, maps, refine, points=points)
     if alternative is not None:
-        best = with_alternative(S, T, best, alternative, S.to_local(ls, what="template landmark"),
-                                T.to_local(lt, what="target landmark"))
+        best = with_alternative(S, T, best, alternative, *points, refine=refine)
     return map_to_original(S, T, best.p2p)

@@ -113,19 +113,45 @@ class TemplateARAP:
         self.lam = mass / (stiffness**2 * area)                          # data weight per vertex
         self.solve = splu(sp.csc_matrix(K + sp.diags(self.lam))).solve
         self.E0 = V[self.edges[:, 0]] - V[self.edges[:, 1]]
+        self._pinned: dict = {}
+
+    def pinned_solve(self, pins: np.ndarray):
+        """The solve with the vertices ``pins`` (p,) int (distinct) held at given positions: a function
+        (rhs (n,) float, at (p,) float) -> (n,) float, the minimizer of the same energy under x[pins] = at
+        (Lagrange multipliers through the p columns Z = A^-1 U of the factorized matrix A, made once per pin set)."""
+        key = tuple(np.asarray(pins, dtype=np.int64).tolist())
+        if key not in self._pinned:
+            n = len(self.lam)
+            Z = np.column_stack([self.solve(np.eye(1, n, v).ravel()) for v in key])         # (n, p)
+            self._pinned[key] = (Z, np.linalg.inv(Z[list(key)]))
+        Z, inverse = self._pinned[key]
+        rows = list(key)
+
+        def solve(rhs: np.ndarray, at: np.ndarray) -> np.ndarray:
+            x = self.solve(rhs)
+            return x - Z @ (inverse @ (x[rows] - at))
+        return solve
 
     def register(self, target: "_Target", anchors: np.ndarray, iterations: int, anchor_weight: float,
-                 outlier: float, normal_cos: float) -> np.ndarray:
+                 outlier: float, normal_cos: float, pins: tuple[np.ndarray, np.ndarray] | None = None
+                 ) -> np.ndarray:
         """One registration from the anchors (n,3) (the current images): ``iterations`` local (fan rotations) /
-        global (one factorized solve per coordinate) steps. Returns the deformed template (n,3)."""
+        global (one factorized solve per coordinate) steps; ``pins`` = (template vertex ids (p,) int, distinct;
+        positions (p,3) float): those vertices are held there. Returns the deformed template (n,3)."""
         i, j = self.edges[:, 0], self.edges[:, 1]
         X = anchors.copy()
+        if pins is not None:
+            X[pins[0]] = pins[1]
+            solve = self.pinned_solve(pins[0])
         for it in range(iterations):
             R = _fan_rotations(self.E0, X[i] - X[j], self.weights, self.unsigned)
             rhs = self.signed @ (0.5 * self.weights[:, None] * np.einsum("bij,bj->bi", R[i] + R[j], self.E0))
             goal = (anchors if it == 0 else
                     target.data_goal(X, vertex_normals(X, self.F), anchors, anchor_weight, outlier, normal_cos))
-            X = np.column_stack([self.solve(rhs[:, c] + self.lam * goal[:, c]) for c in range(3)])
+            if pins is None:
+                X = np.column_stack([self.solve(rhs[:, c] + self.lam * goal[:, c]) for c in range(3)])
+            else:
+                X = np.column_stack([solve(rhs[:, c] + self.lam * goal[:, c], pins[1][:, c]) for c in range(3)])
         return X
 
 
@@ -161,7 +187,7 @@ class _Target:
 
 def refine_deform(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, stiffness: float = 0.03,
                   iterations: int = 3, rounds: int = 10, anchor_weight: float = 0.5, outlier: float = 3.0,
-                  normal_cos: float = 0.5) -> np.ndarray:
+                  normal_cos: float = 0.5, points: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """ARAP registration of the template onto the target from the current map (module docstring).
 
     Args:
@@ -177,6 +203,9 @@ def refine_deform(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, stif
         anchor_weight: share of the data term that pulls a vertex to its current image (the rest pulls it to the
             target surface); images farther than ``outlier`` x the median from the deformed vertex get none.
         normal_cos: closest-point pairs need the deformed normal and the target normal at a cosine above this.
+        points: given corresponding points (template local ids (p,) int, target local ids (p,) int) or None:
+            each registration holds those template vertices at their target vertices (hard constraints; the
+            first of repeated template ids counts) and the map sends them there.
     Returns: (n_s,) int refined map. The template's factorized operators are cached on ``source``.
     """
     if not stiffness > 0 or int(iterations) < 1 or int(rounds) < 1 or not 0 <= anchor_weight <= 1:
@@ -185,17 +214,44 @@ def refine_deform(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, stif
     p2p = np.asarray(p2p, dtype=np.int64)
     arap = source.cached(("arap", float(stiffness)), lambda: TemplateARAP(source.V, source.F, stiffness, source.area))
     tgt = _Target(target)
+    pins = None
+    if points is not None:
+        points = distinct_points(points)
+        p2p = keep_points(p2p, points)
+        pins = (points[0], target.V[points[1]])
     for _ in range(int(rounds)):
-        X = arap.register(tgt, target.V[p2p], int(iterations), anchor_weight, outlier, normal_cos)
+        X = arap.register(tgt, target.V[p2p], int(iterations), anchor_weight, outlier, normal_cos, pins)
         new = tgt.nearest_vertices(X, vertex_normals(X, source.F), p2p)
+        if points is not None:
+            new = keep_points(new, points)
         if np.array_equal(new, p2p):
             break
         p2p = new
     return p2p
 
 
+def keep_points(p2p: np.ndarray, points: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """A copy of the map p2p (n_s,) int that sends the given template points (p,) int to their target points (p,)
+    int (local ids)."""
+    out = np.array(p2p, dtype=np.int64)
+    out[np.asarray(points[0], dtype=np.int64)] = np.asarray(points[1], dtype=np.int64)
+    return out
+
+
+def distinct_points(points: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Given points (template ids (p,) int, target ids (p,) int) with each template id once (its first pair kept)."""
+    source_ids = np.asarray(points[0], dtype=np.int64)
+    target_ids = np.asarray(points[1], dtype=np.int64)
+    if source_ids.shape != target_ids.shape or source_ids.ndim != 1:
+        raise ValueError(f"points: two (p,) id arrays of one length, got {source_ids.shape} and {target_ids.shape}")
+    _, first = np.unique(source_ids, return_index=True)
+    first = np.sort(first)
+    return source_ids[first], target_ids[first]
+
+
 def refine_settle(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, stiffness: float = 0.03,
-                  iterations: int = 6, rounds: int = 10, normal_cos: float = 0.5) -> np.ndarray:
+                  iterations: int = 6, rounds: int = 10, normal_cos: float = 0.5,
+                  points: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """``refine_deform`` with no pull toward the current images (``anchor_weight`` 0): ARAP against the target
     surface only (point-to-plane onto normal-compatible nearest vertices, i.e. non-rigid ICP), started from the
     current map: refinement step "settle", on request (not a default step). After ``refine_deform`` (whose anchors
@@ -210,4 +266,4 @@ def refine_settle(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, stif
     Args: as ``refine_deform``. Returns: (n_s,) int refined map.
     """
     return refine_deform(source, target, p2p, stiffness=stiffness, iterations=iterations, rounds=rounds,
-                         anchor_weight=0.0, normal_cos=normal_cos)
+                         anchor_weight=0.0, normal_cos=normal_cos, points=points)

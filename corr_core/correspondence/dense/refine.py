@@ -29,14 +29,14 @@ refined map is least distorted (``map_distortion``).
 from __future__ import annotations
 
 import inspect
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from corr_core.correspondence.dense.basis import MeshBasis, in_size_of, map_to_local
-from corr_core.correspondence.dense.deform import refine_deform, refine_settle
+from corr_core.correspondence.dense.deform import keep_points, refine_deform, refine_settle
 from corr_core.correspondence.dense.fmaps import fmap_from_p2p
 from corr_core.correspondence.dense.nearest import PointTree, nearest_compatible, vertex_neighbourhoods
 from corr_core.geometry.primitives import unique_edges
@@ -317,7 +317,7 @@ def _assign(tree: PointTree, target: MeshBasis, p2p: np.ndarray, moved: np.ndarr
 # lowers the distortion) or "extrinsic+deform" are more accurate, on poses of one body less: docs/dense.md
 # "Refinement plan" (`python bench/refine_plans.py --seeds 10-13` and the pipelines' results).
 DEFAULT_REFINE = "extrinsic+spectral+deform"
-_MAP_ARGUMENTS = ("source", "target", "p2p")          # what refine_map passes to every step itself
+_MAP_ARGUMENTS = ("source", "target", "p2p", "points")    # what refine_map passes to the steps itself
 ONLY_IF_LOWER = "?"                                    # a step's name ending so: kept only where it lowers distortion
 
 
@@ -345,11 +345,18 @@ class RefineStep:
             raise ValueError(f"refinement step {self.name!r}: unknown option(s) {unknown}; it takes {takes}")
         object.__setattr__(self, "options", dict(self.options))
 
-    def run(self, source: MeshBasis, target: MeshBasis, p2p: np.ndarray) -> np.ndarray:
+    def run(self, source: MeshBasis, target: MeshBasis, p2p: np.ndarray,
+            points: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """This step applied to ``p2p`` (n_s,) int local ids: the refined (n_s,) int map (``p2p`` itself when the
         step is ``only_if_lower`` and does not lower the distortion). The step sees the target in the template's
-        size (``basis.in_size_of``: its positions are compared with the template's)."""
-        refined = REFINE_STEPS[self.name](source, in_size_of(target, source), p2p, **self.options)
+        size (``basis.in_size_of``: its positions are compared with the template's). ``points``: given
+        corresponding points (template local ids (p,) int, target local ids (p,) int): a step that takes them
+        (the registrations: constraints) gets them, and every step's map sends them to their target points."""
+        step = REFINE_STEPS[self.name]
+        extra = {"points": points} if points is not None and "points" in inspect.signature(step).parameters else {}
+        refined = step(source, in_size_of(target, source), p2p, **self.options, **extra)
+        if points is not None:
+            refined = keep_points(refined, points)
         if self.only_if_lower and not map_distortion(source, target, refined) < map_distortion(source, target, p2p):
             return p2p
         return refined
@@ -391,15 +398,18 @@ def refine_plan(refine: str | Sequence | None = DEFAULT_REFINE,
 
 
 def refine_map(source: MeshBasis, target: MeshBasis, p2p: np.ndarray,
-               refine: str | Sequence | None = DEFAULT_REFINE, options: Mapping | None = None) -> np.ndarray:
+               refine: str | Sequence | None = DEFAULT_REFINE, options: Mapping | None = None, *,
+               points: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """The pointwise refinements of ``refine_plan(refine, options)``, in order (``DEFAULT_REFINE``
     "extrinsic+spectral+deform" is the default of ``dense_map`` and of the ``corr.dense_refine`` stage).
 
-    Args: source, target: bases; p2p: (n_s,) int current map (local ids); refine, options: as ``refine_plan``.
+    Args: source, target: bases; p2p: (n_s,) int current map (local ids); refine, options: as ``refine_plan``;
+        points: given corresponding points (template, target local ids, (p,) int each) the map keeps
+        (``RefineStep.run``), or None.
     Returns: (n_s,) int refined map.
     """
     for step in refine_plan(refine, options):
-        p2p = step.run(source, target, p2p)
+        p2p = step.run(source, target, p2p, points)
     return p2p
 
 
@@ -517,16 +527,37 @@ def best_with_points(source: MeshBasis, target: MeshBasis, maps: list, points_so
 
 
 def with_alternative(source: MeshBasis, target: MeshBasis, best: BestMap, alternative: np.ndarray,
-                     points_source: np.ndarray, points_target: np.ndarray) -> BestMap:
+                     points_source: np.ndarray, points_target: np.ndarray,
+                     refine: str | Sequence | None = None) -> BestMap:
     """``best`` (the refined map made from given points) or ``alternative``, whichever ``best_with_points`` keeps.
 
     Args: best: ``refine_best``'s result for the map made from the points; alternative: (n_s original,) int another
         dense map of the same pair in original ids (-1 off the kept component), e.g. the automatic one;
-        points_source, points_target: (L,) int local ids of the given points.
+        points_source, points_target: (L,) int local ids of the given points; refine: the plan that refined
+        ``best`` with the points held (``refine_best(points=)``), or None: an alternative that is kept is then
+        held to the points the same way (``hold_points``), so the kept map sends them where they are given. The
+        two are compared as they come: holding a map runs the registration once more, which lowers any map's
+        distortion a little, so holding only the alternative before the comparison would favour it (on the
+        course poses it then replaced maps from the points that were more accurate).
     Returns: ``BestMap`` of the two (index 1: the alternative was kept).
     """
-    return best_with_points(source, target, [best.p2p, map_to_local(source, target, alternative)], points_source,
+    other = map_to_local(source, target, alternative)
+    kept = best_with_points(source, target, [best.p2p, other], points_source,
                             points_target, known_distortions=(best.distortions[best.index],))
+    if kept.index == 1 and refine is not None:
+        kept = replace(kept, p2p=hold_points(source, target, kept.p2p, refine, (points_source, points_target)))
+    return kept
+
+
+def hold_points(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, refine: str | Sequence | None,
+                points: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """A refined map p2p (n_s,) int made to hold given points as ``refine_map(refine, points=points)`` holds them:
+    the plan's steps that take the points (the registrations, "deform" / "settle") run again with them, and the map
+    sends them to their target points (``keep_points``). Returns (n_s,) int."""
+    for step in refine_plan(refine):
+        if "points" in inspect.signature(REFINE_STEPS[step.name]).parameters:
+            p2p = step.run(source, target, p2p, points)
+    return keep_points(p2p, points)
 
 
 # The distortion margin at which a kept map counts as sure (confidence 1): the runner-up hypothesis refined to a
@@ -663,7 +694,8 @@ def best_refined(maps: Sequence[np.ndarray], step_distortions: Sequence[Sequence
 
 def refine_best(source: MeshBasis, target: MeshBasis, maps: list,
                 refine: str | Sequence | None = DEFAULT_REFINE, options: Mapping | None = None, *,
-                drop_margin: float = DROP_MARGIN, later_margin: float = LATER_DROP_MARGIN) -> BestMap:
+                drop_margin: float = DROP_MARGIN, later_margin: float = LATER_DROP_MARGIN,
+                points: tuple[np.ndarray, np.ndarray] | None = None) -> BestMap:
     """Refine each of several hypothesis maps (``refine_map``) and keep the best: the lowest
     ``refinement_score`` (geometric mean of the distortion after each step).
 
@@ -672,7 +704,8 @@ def refine_best(source: MeshBasis, target: MeshBasis, maps: list,
     next step; after each later step but the last, one whose ``refinement_score`` so far is more than
     ``later_margin`` above the least is dropped too (``surviving_after_step``).
 
-    Args: maps: [(n_s,) int local ids], e.g. the upsampled maps of ``init.automatic_hypotheses``.
+    Args: maps: [(n_s,) int local ids], e.g. the upsampled maps of ``init.automatic_hypotheses``; points: given
+        corresponding points every refined map keeps (``refine_map``), or None.
     Returns: ``BestMap`` (the kept refined map, its index in ``maps``, every hypothesis's ``map_distortion``, which
     were dropped; its ``confidence`` says how clear the choice was). Ties go to the earlier hypothesis (the better
     ranked one).
@@ -681,14 +714,14 @@ def refine_best(source: MeshBasis, target: MeshBasis, maps: list,
         raise ValueError("refine_best: no hypothesis map given")
     plan = refine_plan(refine, options)
     if len(maps) == 1 or len(plan) <= 1:
-        refined = [refine_map(source, target, m, plan) for m in maps]
+        refined = [refine_map(source, target, m, plan, points=points) for m in maps]
         return best_refined(refined, [[map_distortion(source, target, m)] for m in refined])
-    refined = [plan[0].run(source, target, m) for m in maps]
+    refined = [plan[0].run(source, target, m, points) for m in maps]
     steps = [[map_distortion(source, target, m)] for m in refined]
     alive = surviving_after_step(steps, range(len(maps)), drop_margin=drop_margin, later_margin=later_margin)
     for k, step in enumerate(plan[1:], start=2):
         for i in alive:
-            refined[i] = step.run(source, target, refined[i])
+            refined[i] = step.run(source, target, refined[i], points)
             steps[i].append(map_distortion(source, target, refined[i]))
         if k < len(plan):
             alive = surviving_after_step(steps, alive, drop_margin=drop_margin, later_margin=later_margin)

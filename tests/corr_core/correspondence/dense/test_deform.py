@@ -133,3 +133,69 @@ def test_data_term_pulls_onto_the_tangent_plane_of_a_compatible_target_vertex():
     np.testing.assert_allclose(goal[:2], X[:2] * [1.0, 1.0, 0.0], atol=1e-12)   # onto the plane, in place
     np.testing.assert_allclose(goal[2], X[2])                                 # facing away: no pull
     np.testing.assert_allclose(goal[3:], 0.5 * X[3:] + 0.5 * X[3:] * [1.0, 1.0, 0.0], atol=1e-12)
+
+
+def test_pinned_solve_is_the_constrained_minimizer(pair):
+    """``TemplateARAP.pinned_solve`` gives the minimizer of the registration's quadratic energy under x[pins] = at:
+    the solution of the KKT system, and the pinned entries exactly."""
+    import scipy.sparse as sp
+
+    from corr_core.correspondence.dense.deform import TemplateARAP
+
+    S, _ = pair
+    arap = TemplateARAP(S.V, S.F, 0.03, S.area)
+    _, _, K, _ = arap_operators(S.V, S.F)
+    A = (K + sp.diags(arap.lam)).toarray()
+    pins = np.array([5, 40, 123])
+    rhs = np.random.default_rng(1).standard_normal(S.n)
+    at = np.array([0.1, -0.2, 0.3])
+    x = arap.pinned_solve(pins)(rhs, at)
+    U = np.zeros((S.n, len(pins)))
+    U[pins, np.arange(len(pins))] = 1.0
+    kkt = np.block([[A, U], [U.T, np.zeros((len(pins), len(pins)))]])
+    want = np.linalg.solve(kkt, np.r_[rhs, at])[:S.n]
+    assert np.allclose(x, want, atol=1e-8)
+    assert np.allclose(x[pins], at, atol=1e-10)
+
+
+def test_refine_deform_holds_given_points_where_they_are_given(pair):
+    """With ``points`` the map sends each given template point to its given target point even when that is a few
+    edges off the truth (without them the registration pulls them back), and the first pair of a repeated
+    template id counts."""
+    S, T = pair
+    truth = np.arange(S.n)
+    nbrs = cKDTree(T.V).query(T.V[[10, 200, 350, 500]], k=4)[1][:, 3]     # a vertex a few edges off the truth
+    given = (np.array([10, 200, 350, 500, 10]), np.r_[nbrs, 77])
+    free = refine_deform(S, T, truth)
+    held = refine_deform(S, T, truth, points=given)
+    assert not np.array_equal(free[given[0][:4]], nbrs)
+    assert np.array_equal(held[given[0][:4]], nbrs)
+    assert _error(T, held) < 0.05                                  # the rest of the map stays near the truth
+    assert np.array_equal(refine_settle(S, T, truth, points=given)[given[0][:4]], nbrs)
+
+
+def test_the_registration_holds_pinned_vertices_at_their_positions(pair):
+    """``TemplateARAP.register`` with pins: those vertices end exactly at the given positions (not merely near
+    the target), the others move as the registration moves them."""
+    from corr_core.correspondence.dense.deform import TemplateARAP
+
+    S, T = pair
+    arap = TemplateARAP(S.V, S.F, 0.03, S.area)
+    ids = np.array([10, 200, 350])
+    at = T.V[ids] + np.array([0.01, -0.01, 0.005])                     # off the target surface on purpose
+    X = arap.register(_Target(T), T.V.copy(), 3, 0.5, 3.0, 0.5, pins=(ids, at))
+    assert np.allclose(X[ids], at, atol=1e-10)
+    free = arap.register(_Target(T), T.V.copy(), 3, 0.5, 3.0, 0.5)
+    assert not np.allclose(free[ids], at, atol=1e-4)
+
+
+def test_every_refinement_step_keeps_given_points(pair):
+    """A step that takes no points (spectral, extrinsic) still leaves the given points where they are given."""
+    S, T = pair
+    truth = np.arange(S.n)
+    given = (np.array([10, 200]), np.array([11, 201]))
+    for plan in ("spectral", "extrinsic", "extrinsic+spectral+deform"):
+        refined = refine_map(S, T, truth, plan, points=given)
+        assert np.array_equal(refined[given[0]], given[1]), plan
+    with pytest.raises(ValueError, match="unknown option"):
+        refine_map(S, T, truth, "deform", {"deform": {"points": given}})

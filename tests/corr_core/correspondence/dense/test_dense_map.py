@@ -365,3 +365,12 @@ def test_hypotheses_to_refine_takes_the_best_two_and_any_close_pool_candidate():
     assert ranked((0.8, 0.05), (0.8, 0.051), (0.3, close)) == 2                      # a twist: not in the pool
     assert ranked((0.8, 0.05), (0.8, 0.051), (0.8, 0.08)) == 2                       # far in WKS
     assert ranked((0.8, 0.05)) == 1 and ranked() == 0
+
+
+def test_given_points_go_where_they_are_given(body, pose_maps):
+    """The map from given points sends each template point to its given target point, also when those are a
+    vertex off the truth (a user's click): the refinement holds them instead of pulling them back."""
+    assert np.array_equal(pose_maps["sparse"][body["sparse"]], body["sparse"])
+    ring = cKDTree(body["Vp"]).query(body["Vp"][body["sparse"]], k=2)[1][:, 1]      # nearest other vertex
+    p2p = _run(body, body["Vp"], body["F"], body["T"], sparse_target=ring)
+    assert np.array_equal(p2p[body["sparse"]], ring)

@@ -395,6 +395,28 @@ def test_with_alternative_keeps_the_alternative_only_when_best_with_points_would
     assert len(scored) == 1 and kept.distortions[0] == from_points.distortions[0]   # map 0's distortion reused
 
 
+def test_a_kept_alternative_is_held_to_the_points(pair, monkeypatch):
+    """With the plan that refined the map from the points, ``with_alternative`` runs the plan's registration on
+    the alternative it keeps, with the points held (``hold_points``); an alternative it does not keep is not
+    refined at all."""
+    from corr_core.correspondence.dense import refine
+    from corr_core.correspondence.dense.basis import map_to_original
+
+    S, T = pair
+    truth, turned = np.arange(S.n), _turned_map(S, T)
+    points = (S.samples[:4], truth[S.samples[:4]].copy())
+    points[1][0] = int(np.argsort(np.linalg.norm(T.V - T.V[points[1][0]], axis=1))[1])   # a vertex off the truth
+    from_points = refine.BestMap(turned, 0, (np.inf,))
+    held = refine.with_alternative(S, T, from_points, map_to_original(S, T, truth), *points, refine="spectral+deform")
+    assert held.index == 1 and np.array_equal(held.p2p[points[0]], points[1])
+    assert np.array_equal(held.p2p, refine.hold_points(S, T, truth, "spectral+deform", points))
+    runs = []
+    monkeypatch.setattr(refine.RefineStep, "run", lambda *a, **k: runs.append(a) or a[3])
+    refine.with_alternative(S, T, refine.BestMap(truth, 0, (0.0,)), map_to_original(S, T, turned), *points,
+                            refine="deform")
+    assert not runs                                                        # turned keeps no point: not refined
+
+
 def test_map_to_local_inverts_map_to_original(pair):
     from corr_core.correspondence.dense.basis import map_to_local, map_to_original
 
