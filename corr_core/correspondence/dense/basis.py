@@ -159,19 +159,17 @@ class MeshBasis:
         reused for every target; a target's extremities, found and then used). Each row is one heat-method solve
         from its own vertex, so a kept row is the one ``distances`` gives, bit for bit. At most
         ``MAX_KEPT_DISTANCE_ROWS`` rows are kept per basis; later ones are computed every time."""
-        points = np.atleast_1d(np.asarray(points, dtype=np.int64))
+        points = np.atleast_1d(np.asarray(points, dtype=np.int64)).tolist()
+        if not points:
+            return np.empty((0, self.n))
         rows = self.cached("point_distance_rows", dict)
-        missing = [int(v) for v in dict.fromkeys(points.tolist()) if v not in rows]
-        if missing:
-            fresh = self.distances(missing)
-            for v, row in zip(missing, fresh):
-                if len(rows) < MAX_KEPT_DISTANCE_ROWS:
-                    row.setflags(write=False)
-                    rows[v] = row
-            if any(v not in rows for v in missing):                # over the limit: no row kept for these
-                found = dict(zip(missing, fresh))
-                return np.stack([rows[v] if v in rows else found[v] for v in points.tolist()])
-        return np.stack([rows[v] for v in points.tolist()]) if len(points) else np.empty((0, self.n))
+        missing = [v for v in dict.fromkeys(points) if v not in rows]
+        fresh = dict(zip(missing, self.distances(missing))) if missing else {}
+        for v, row in fresh.items():
+            if len(rows) < MAX_KEPT_DISTANCE_ROWS:
+                row.setflags(write=False)
+                rows[v] = row
+        return np.stack([rows[v] if v in rows else fresh[v] for v in points])
 
     def face_frames(self) -> tuple[np.ndarray, np.ndarray]:
         """Per-face geometry of piecewise-linear gradients, made on first use and then shared (read-only): unit

@@ -345,6 +345,12 @@ class RefineStep:
             raise ValueError(f"refinement step {self.name!r}: unknown option(s) {unknown}; it takes {takes}")
         object.__setattr__(self, "options", dict(self.options))
 
+    @property
+    def takes_points(self) -> bool:
+        """Whether the step's function is constrained by given points (its ``points`` argument: the
+        registrations "deform" and "settle")."""
+        return "points" in inspect.signature(REFINE_STEPS[self.name]).parameters
+
     def run(self, source: MeshBasis, target: MeshBasis, p2p: np.ndarray,
             points: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """This step applied to ``p2p`` (n_s,) int local ids: the refined (n_s,) int map (``p2p`` itself when the
@@ -352,9 +358,8 @@ class RefineStep:
         size (``basis.in_size_of``: its positions are compared with the template's). ``points``: given
         corresponding points (template local ids (p,) int, target local ids (p,) int): a step that takes them
         (the registrations: constraints) gets them, and every step's map sends them to their target points."""
-        step = REFINE_STEPS[self.name]
-        extra = {"points": points} if points is not None and "points" in inspect.signature(step).parameters else {}
-        refined = step(source, in_size_of(target, source), p2p, **self.options, **extra)
+        extra = {"points": points} if points is not None and self.takes_points else {}
+        refined = REFINE_STEPS[self.name](source, in_size_of(target, source), p2p, **self.options, **extra)
         if points is not None:
             refined = keep_points(refined, points)
         if self.only_if_lower and not map_distortion(source, target, refined) < map_distortion(source, target, p2p):
@@ -555,7 +560,7 @@ def hold_points(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, refine: s
     the plan's steps that take the points (the registrations, "deform" / "settle") run again with them, and the map
     sends them to their target points (``keep_points``). Returns (n_s,) int."""
     for step in refine_plan(refine):
-        if "points" in inspect.signature(REFINE_STEPS[step.name]).parameters:
+        if step.takes_points:
             p2p = step.run(source, target, p2p, points)
     return keep_points(p2p, points)
 
