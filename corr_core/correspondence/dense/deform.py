@@ -232,9 +232,10 @@ def refine_deform(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, stif
 
 def keep_points(p2p: np.ndarray, points: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     """A copy of the map p2p (n_s,) int that sends the given template points (p,) int to their target points (p,)
-    int (local ids)."""
+    int (local ids); a repeated template id goes to its first pair's target, as the registration holds it."""
+    source_ids, target_ids = distinct_points(points)
     out = np.array(p2p, dtype=np.int64)
-    out[np.asarray(points[0], dtype=np.int64)] = np.asarray(points[1], dtype=np.int64)
+    out[source_ids] = target_ids
     return out
 
 

@@ -197,5 +197,8 @@ def test_every_refinement_step_keeps_given_points(pair):
     for plan in ("spectral", "extrinsic", "extrinsic+spectral+deform"):
         refined = refine_map(S, T, truth, plan, points=given)
         assert np.array_equal(refined[given[0]], given[1]), plan
+    repeated = (np.array([10, 200, 10]), np.array([11, 201, 12]))          # the first pair of a template id counts
+    for plan in ("spectral", "deform"):
+        assert np.array_equal(refine_map(S, T, truth, plan, points=repeated)[[10, 200]], [11, 201]), plan
     with pytest.raises(ValueError, match="unknown option"):
         refine_map(S, T, truth, "deform", {"deform": {"points": given}})
