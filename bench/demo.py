@@ -178,6 +178,8 @@ def main() -> None:
                     help="also compare the results with one cold run of REF")
     ap.add_argument("--work", default=None, help="folder for the trees and caches (default: a temporary one)")
     args = ap.parse_args()
+    if args.work:
+        os.makedirs(args.work, exist_ok=True)   # a new folder given by name is made, as the caches under it
     work = tempfile.mkdtemp(prefix="bench_demo_", dir=args.work)
     try:
         base_tree, base_commit = export(args.baseline_ref, work)
