@@ -179,6 +179,8 @@ def main() -> None:
     ap.add_argument("--work", default=None, help="folder for the trees and caches (default: a temporary one)")
     args = ap.parse_args()
     if args.work:
+        if os.path.exists(args.work) and not os.path.isdir(args.work):
+            ap.error(f"--work {args.work}: is a file, not a folder; name a folder (made when missing)")
         os.makedirs(args.work, exist_ok=True)   # a new folder given by name is made, as the caches under it
     work = tempfile.mkdtemp(prefix="bench_demo_", dir=args.work)
     try:
