@@ -100,7 +100,8 @@ class Progress:
                       file=self.stream, flush=True)
 
 
-SCHEDULER_TIMEOUT_S = 10
+SCHEDULER_TIMEOUT_S = 10   # default; STAGES_SCHEDULER_TIMEOUT (seconds) sets another (``scheduler_timeout``)
+SCHEDULER_TIMEOUT_ENV = "STAGES_SCHEDULER_TIMEOUT"
 DASHBOARD_ADDRESS = "127.0.0.1:0"  # this machine only, a free port (see docs/scale.md to expose it)
 
 
@@ -124,7 +125,8 @@ def make_client(workers: int = 2, scheduler: str | None = None, local_dir: str |
     by the surviving workers' connection-reset tracebacks.
 
     Raises:
-        UserError: the scheduler does not answer within SCHEDULER_TIMEOUT_S seconds, or its address is malformed.
+        UserError: the scheduler does not answer within ``scheduler_timeout()`` seconds, or its address is
+            malformed.
     """
     from distributed import Client, LocalCluster
     import dask
@@ -150,12 +152,33 @@ def _connect(Client, address: str):
            "check the host, port and firewall, or leave out --scheduler to run on local worker processes")
     if "://" not in address and ":" not in address:
         raise UserError(f"--scheduler '{address}' is not an address like tcp://HOST:PORT", fix=fix)
+    seconds = scheduler_timeout()
     try:
-        return Client(address, timeout=f"{SCHEDULER_TIMEOUT_S}s")
+        return Client(address, timeout=f"{seconds:g}s")
     except (OSError, ValueError, TypeError, TimeoutError) as exc:
-        raise UserError(f"cannot connect to the dask scheduler at {address} within {SCHEDULER_TIMEOUT_S} s "
+        raise UserError(f"cannot connect to the dask scheduler at {address} within {seconds:g} s "
                         f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else 'no answer'})",
                         fix=fix) from None
+
+
+def scheduler_timeout() -> float:
+    """Seconds to wait for a ``--scheduler`` to answer (dask retries a refused connection until then):
+    ``STAGES_SCHEDULER_TIMEOUT`` when set, else ``SCHEDULER_TIMEOUT_S``.
+
+    Raises:
+        UserError: the variable is not a positive number of seconds.
+    """
+    text = os.environ.get(SCHEDULER_TIMEOUT_ENV, "").strip()
+    if not text:
+        return float(SCHEDULER_TIMEOUT_S)
+    try:
+        seconds = float(text)
+    except ValueError:
+        seconds = float("nan")
+    if not 0 < seconds < float("inf"):
+        raise UserError(f"{SCHEDULER_TIMEOUT_ENV}={text!r} is not a positive number of seconds",
+                        fix=f"set it to e.g. {SCHEDULER_TIMEOUT_S} (seconds to wait for --scheduler), or unset it")
+    return seconds
 
 
 @contextmanager

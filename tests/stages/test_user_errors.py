@@ -157,9 +157,24 @@ def test_bad_grid_syntax_is_a_usage_error(project, tmp_path, grid):
 
 def test_a_closed_scheduler_is_a_clear_error(project, tmp_path):
     address = f"tcp://127.0.0.1:{free_port()}"  # nothing listens there
-    err = _fails(cli(["run", str(project), "--scheduler", address], tmp_path, timeout=120), 1,
-                 address, "fix:")
+    # 2 s instead of the default 10 s (dask retries a refused connection until then; the default: next test)
+    err = _fails(cli(["run", str(project), "--scheduler", address], tmp_path, timeout=120,
+                     env={"STAGES_SCHEDULER_TIMEOUT": "2"}), 1, address, "fix:", "within 2 s")
     assert "dask scheduler" in err
+
+
+def test_the_scheduler_timeout_is_10_s_or_the_variable_and_a_bad_variable_is_a_clear_error(monkeypatch):
+    from stages.execute import scheduler_timeout
+
+    monkeypatch.delenv("STAGES_SCHEDULER_TIMEOUT", raising=False)
+    assert scheduler_timeout() == 10.0
+    monkeypatch.setenv("STAGES_SCHEDULER_TIMEOUT", " 2.5 ")
+    assert scheduler_timeout() == 2.5
+    for bad in ("ten", "0", "-3", "inf", "nan"):
+        monkeypatch.setenv("STAGES_SCHEDULER_TIMEOUT", bad)
+        with pytest.raises(UserError) as e:
+            scheduler_timeout()
+        assert f"STAGES_SCHEDULER_TIMEOUT='{bad}' is not a positive number of seconds" in str(e.value), bad
 
 
 def test_a_malformed_scheduler_address_is_a_clear_error(project, tmp_path):
