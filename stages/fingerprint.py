@@ -158,7 +158,7 @@ def _ast_digest(obj: Any) -> tuple[str, ast.AST | None]:
     registration is wiring, not computation); the tree returned keeps those decorators, so that a project
     decorator's code is followed."""
     try:
-        src = textwrap.dedent(inspect.getsource(obj))
+        src = textwrap.dedent(_source(obj))
         tree = _strip_docstrings(ast.parse(src))
         outer = next((node for node in ast.walk(tree)
                       if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))), None)
@@ -256,18 +256,97 @@ class _Unresolved:
 
 def _module_tree(name: str) -> ast.Module | None:
     """The parsed source of module ``name`` (None when it has none readable), parsed once per file version."""
+    return _module_source(name).tree
+
+
+class _ModuleSource:
+    """A module's source file as read once per file version: its lines (``splitlines(keepends=True)``), its
+    parsed ``tree`` and, built on first use, the definitions by qualified name (``definitions``)."""
+
+    def __init__(self, path: str | None, text: str | None):
+        self.path = path
+        self.lines = text.splitlines(keepends=True) if text is not None else []
+        try:
+            self.tree = ast.parse(text) if text is not None else None
+        except (SyntaxError, ValueError):
+            self.tree = None
+        self._definitions: dict | None = None
+
+    @property
+    def definitions(self) -> dict[str, list[ast.AST]]:
+        """{qualname: [function and class nodes with that ``__qualname__``, in source order]} (Python's own
+        qualnames: ``C.method``, ``f.<locals>.g``; the order ``inspect``'s class search meets them in)."""
+        if self._definitions is None:
+            found: dict[str, list[ast.AST]] = {}
+            if self.tree is not None:
+                _collect_definitions(self.tree, [], found)
+            self._definitions = found
+        return self._definitions
+
+
+def _collect_definitions(node: ast.AST, stack: list[str], found: dict) -> None:
+    for child in ast.iter_child_nodes(node):
+        if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            found.setdefault(".".join([*stack, child.name]), []).append(child)
+            inner = [*stack, child.name] + ([] if isinstance(child, ast.ClassDef) else ["<locals>"])
+            _collect_definitions(child, inner, found)
+        else:
+            _collect_definitions(child, stack, found)
+
+
+def _module_source(name: str) -> _ModuleSource:
+    """``_ModuleSource`` of module ``name`` (no lines and no tree when it has no readable source)."""
     path = getattr(sys.modules.get(name), "__file__", None)
     key = ("tree", name, _file_stamp(path))
     if key not in _TREES:
         try:
-            with open(inspect.getsourcefile(sys.modules[name]), encoding="utf-8") as f:
-                _TREES[key] = ast.parse(f.read())
-        except (KeyError, TypeError, OSError, SyntaxError, ValueError):
-            _TREES[key] = None
+            source_path = inspect.getsourcefile(sys.modules[name])
+            with open(source_path, encoding="utf-8") as f:
+                _TREES[key] = _ModuleSource(source_path, f.read())
+        except (KeyError, TypeError, OSError, ValueError):
+            _TREES[key] = _ModuleSource(None, None)
     return _TREES[key]
 
 
-_TREES: dict[tuple, ast.Module | None] = {}
+_TREES: dict[tuple, _ModuleSource] = {}
+
+
+def _source(obj: Any) -> str:
+    """The source text of a function or class, giving the AST ``inspect.getsource(obj)`` gives: cut from its
+    module's lines, parsed once per file (``inspect`` tokenizes every function's text and parses the whole module
+    again for every class, the larger part of planning); ``inspect.getsource`` itself when the definition is not
+    found there unambiguously (a lambda, a function made at run time, a file changed since its import).
+
+    Raises OSError or TypeError as ``inspect.getsource``."""
+    node, lines = _definition_node(obj)
+    if node is None:
+        return inspect.getsource(obj)
+    first = min([node.lineno] + [d.lineno for d in node.decorator_list])
+    return "".join(lines[first - 1:node.end_lineno])
+
+
+def _definition_node(obj: Any) -> tuple[ast.AST | None, list[str]]:
+    """(the def or class node ``inspect.getsource`` would read for ``obj``, its module's lines), or (None, [])."""
+    try:
+        obj = inspect.unwrap(obj)                     # as inspect.getsourcelines
+    except ValueError:
+        return None, []
+    qualname, module = getattr(obj, "__qualname__", None), getattr(obj, "__module__", None)
+    if not isinstance(qualname, str) or not isinstance(module, str) or module not in sys.modules:
+        return None, []
+    source = _module_source(module)
+    if source.tree is None:
+        return None, []
+    candidates = source.definitions.get(qualname, [])
+    if inspect.isclass(obj):                          # inspect takes the first class of that qualname
+        classes = [n for n in candidates if isinstance(n, ast.ClassDef)]
+        return (classes[0], source.lines) if classes else (None, [])
+    code = getattr(obj, "__code__", None)
+    if code is None or code.co_filename != source.path:
+        return None, []
+    functions = [n for n in candidates if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))
+                 and min([n.lineno] + [d.lineno for d in n.decorator_list]) == code.co_firstlineno]
+    return (functions[0], source.lines) if len(functions) == 1 else (None, [])
 
 
 def _module_digest(name: str) -> str:

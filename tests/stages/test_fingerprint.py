@@ -329,3 +329,135 @@ def test_the_audit_stops_watching_a_thread_that_outlives_it(package):
     thread.join()
     names = {q for _, q in rec.executed()}
     assert "during" in names and "after" not in names and "f1999" not in names
+
+
+# ---- the source of a definition, cut from its module's parsed file ----------------------------------------------
+TRICKY = '''
+import functools
+
+def deco(f):
+    @functools.wraps(f)
+    def wrapper(*a):
+        return f(*a)
+    return wrapper
+
+if SWITCH:
+    def chosen(x):
+        return x + 1
+else:
+    def chosen(x):
+        return x + 2
+
+@deco
+@functools.lru_cache(maxsize=None)
+def decorated(x):
+    return x * 3          # a trailing comment
+    # and a comment line in the block
+
+class Outer:
+    """Outer."""
+    class Inner:
+        @staticmethod
+        def method(y):
+            text = """
+a string whose lines start at column 0
+"""
+            return y, text
+
+    def method(self):
+        return 1
+
+def factory():
+    def made(z):
+        return z - 1
+    return made
+
+SQUARE = lambda v: v * v
+'''
+
+
+def _project_definitions():
+    """Every function and class defined in the project packages (methods included)."""
+    import inspect
+    import pkgutil
+
+    found = []
+    for package in ("stages", "corr_core", "shapecorr"):
+        root = importlib.import_module(package)
+        names = [package] + [m.name for m in pkgutil.walk_packages(root.__path__, package + ".")
+                             if not m.name.endswith("__main__")]
+        for name in names:
+            holders = [importlib.import_module(name)]
+            while holders:
+                holder = holders.pop()
+                for value in vars(holder).values():
+                    if (inspect.isfunction(value) or inspect.isclass(value)) and value.__module__ == name \
+                            and value not in found:
+                        found.append(value)
+                        if inspect.isclass(value):
+                            holders.append(value)
+    return found
+
+
+def _tree(text: str) -> str:
+    """The AST the fingerprint hashes from a source text, or the error that sends it to its fallback (a string
+    at column 0 inside a method defeats the dedent, with either text)."""
+    import ast
+
+    try:
+        return ast.dump(ast.parse(textwrap.dedent(text)))
+    except SyntaxError as e:
+        return f"{type(e).__name__}: {e.msg}"
+
+
+def test_the_source_cut_from_the_module_gives_inspects_tree_for_every_project_definition():
+    import inspect
+
+    from stages.fingerprint import _definition_node, _source
+
+    definitions = _project_definitions()
+    cut = [d for d in definitions if _definition_node(d)[0] is not None]
+    assert len(definitions) > 1000 and len(cut) > 0.8 * len(definitions), (len(definitions), len(cut))
+    differ = []
+    for d in definitions:
+        try:
+            expected = _tree(inspect.getsource(d))
+        except (OSError, TypeError):              # dataclass-made methods: no source
+            continue
+        if _tree(_source(d)) != expected:
+            differ.append(f"{d.__module__}.{d.__qualname__}")
+    assert not differ, differ
+
+
+@pytest.mark.parametrize("switch", [True, False])
+def test_the_source_cut_from_the_module_is_inspects_for_redefined_decorated_nested_and_made_definitions(
+        load, switch):
+    import inspect
+
+    from stages.fingerprint import _definition_node, _source
+
+    mod = load(f"SWITCH = {switch}\n" + TRICKY)
+    objects = [mod.deco, mod.chosen, mod.decorated, mod.Outer, mod.Outer.Inner, mod.Outer.Inner.method,
+               mod.Outer.method, mod.factory, mod.factory(), mod.SQUARE]
+    for obj in objects:
+        assert _tree(_source(obj)) == _tree(inspect.getsource(obj)), obj
+    assert "x + 1" in _source(mod.chosen) if switch else "x + 2" in _source(mod.chosen)
+    assert _definition_node(mod.decorated)[0] is not None      # found through functools.wraps
+    assert _definition_node(mod.factory())[0] is not None      # factory.<locals>.made
+    assert _definition_node(mod.SQUARE)[0] is None             # a lambda: inspect's own search
+
+
+def test_a_function_whose_file_changed_since_its_import_gets_inspects_source(load):
+    """The file on disk moved the definition: the line no longer matches, so ``inspect.getsource`` answers."""
+    import inspect
+    import os
+
+    from stages.fingerprint import _source
+
+    mod = load("SWITCH = True\n" + TRICKY)
+    path = mod.__file__
+    text = open(path).read()
+    with open(path, "w") as f:
+        f.write("# a new first line\n" + text.replace("return x * 3", "return x * 4"))
+    os.utime(path, ns=(1, 1))                     # another stamp, whatever the clock
+    assert _tree(_source(mod.decorated)) == _tree(inspect.getsource(mod.decorated))
