@@ -171,11 +171,11 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
     if points is not None:
         unheld = maps[0]                # the kept map before the refinement held the points (it always keeps them)
         if holds(alternative, "vertex_map"):
-            best = dense.with_alternative(S, T, best, alternative["vertex_map"], *points, refine=plan)
+            best = dense.with_alternative(S, T, best, alternative["vertex_map"], tuple(points), refine=plan)
             hypothesis = "alternative" if best.index == 1 else hypothesis
             if best.index == 1:
                 unheld = map_to_local(S, T, alternative["vertex_map"])
-        confidence = dense.points_agreement(T, unheld, *points)
+        confidence = dense.points_agreement(T, unheld, tuple(points))
     else:
         confidence = best.confidence if len(maps) > 1 else None
     out = {"vertex_map": map_to_original(S, T, best.p2p), "hypothesis": hypothesis,

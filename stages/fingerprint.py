@@ -284,14 +284,23 @@ class _ModuleSource:
         return self._definitions
 
 
+_STATEMENT_LISTS = ("body", "orelse", "finalbody", "handlers", "cases")   # where a def or class statement can be
+
+
 def _collect_definitions(node: ast.AST, stack: list[str], found: dict) -> None:
-    for child in ast.iter_child_nodes(node):
-        if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
-            found.setdefault(".".join([*stack, child.name]), []).append(child)
-            inner = [*stack, child.name] + ([] if isinstance(child, ast.ClassDef) else ["<locals>"])
-            _collect_definitions(child, inner, found)
-        else:
-            _collect_definitions(child, stack, found)
+    """Add the def and class statements inside ``node`` to ``found`` under their qualnames (``stack``: the names
+    around ``node``); only statement lists are searched, as a definition is a statement, in the order of the
+    node's fields (``inspect``'s class search order: a ``try`` body, its handlers, ``else``, ``finally``)."""
+    for field in node._fields:
+        if field not in _STATEMENT_LISTS:
+            continue
+        for child in getattr(node, field):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                found.setdefault(".".join([*stack, child.name]), []).append(child)
+                inner = [*stack, child.name] + ([] if isinstance(child, ast.ClassDef) else ["<locals>"])
+                _collect_definitions(child, inner, found)
+            elif isinstance(child, ast.AST):
+                _collect_definitions(child, stack, found)
 
 
 def _module_source(name: str) -> _ModuleSource:

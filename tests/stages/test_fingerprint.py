@@ -373,6 +373,15 @@ def factory():
     return made
 
 SQUARE = lambda v: v * v
+
+try:
+    pass
+except ValueError:
+    class Twin:           # never defined, but inspect's search meets it first (a try's handlers before its else)
+        A = 1
+else:
+    class Twin:
+        A = 2
 '''
 
 
@@ -438,7 +447,7 @@ def test_the_source_cut_from_the_module_is_inspects_for_redefined_decorated_nest
 
     mod = load(f"SWITCH = {switch}\n" + TRICKY)
     objects = [mod.deco, mod.chosen, mod.decorated, mod.Outer, mod.Outer.Inner, mod.Outer.Inner.method,
-               mod.Outer.method, mod.factory, mod.factory(), mod.SQUARE]
+               mod.Outer.method, mod.factory, mod.factory(), mod.SQUARE, mod.Twin]
     for obj in objects:
         assert _tree(_source(obj)) == _tree(inspect.getsource(obj)), obj
     assert "x + 1" in _source(mod.chosen) if switch else "x + 2" in _source(mod.chosen)

@@ -102,5 +102,5 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
                                                       T.to_local(lt, what="target landmark"))
     best = refine_best(S, T, maps, refine, points=points)
     if alternative is not None:
-        best = with_alternative(S, T, best, alternative, *points, refine=refine)
+        best = with_alternative(S, T, best, alternative, points, refine=refine)
     return map_to_original(S, T, best.p2p)

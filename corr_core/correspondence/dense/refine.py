@@ -489,31 +489,32 @@ def map_distortion(source: MeshBasis, target: MeshBasis, p2p: np.ndarray) -> flo
 POINTS_TOLERANCE = 0.1   # units sqrt(target area): a given point's image this close to its given target counts
 
 
-def points_agreement(target: MeshBasis, p2p: np.ndarray, points_source: np.ndarray, points_target: np.ndarray, *,
+def points_agreement(target: MeshBasis, p2p: np.ndarray, points: tuple[np.ndarray, np.ndarray], *,
                      tolerance: float = POINTS_TOLERANCE) -> float:
     """Fraction of the given points that a dense map keeps: template point i's image is within ``tolerance``
     (3D distance / sqrt(target area)) of target point i. The confidence of a map made from given points (a map
     turned or mirrored against them scores near 0).
 
-    Args: p2p (n_s,) int local target ids; points_source, points_target: (L,) int local ids, corresponding.
+    Args: p2p (n_s,) int local target ids; points: (template ids (L,) int, target ids (L,) int), local,
+        corresponding (as ``refine_map(points=)``).
     """
-    images = target.V[np.asarray(p2p)[np.asarray(points_source, dtype=np.int64)]]
-    gap = np.linalg.norm(images - target.V[np.asarray(points_target, dtype=np.int64)], axis=1) / target.scale
+    points_source, points_target = (np.asarray(ids, dtype=np.int64) for ids in points)
+    images = target.V[np.asarray(p2p)[points_source]]
+    gap = np.linalg.norm(images - target.V[points_target], axis=1) / target.scale
     return float(np.mean(gap <= tolerance)) if len(gap) else float("nan")
 
 
 MIN_POINTS_KEPT = 0.8     # another map replaces the one made from given points only if it keeps this many of them
 
 
-def best_with_points(source: MeshBasis, target: MeshBasis, maps: list, points_source: np.ndarray,
-                     points_target: np.ndarray, *, min_kept: float = MIN_POINTS_KEPT,
-                     known_distortions: Sequence[float | None] = ()) -> BestMap:
+def best_with_points(source: MeshBasis, target: MeshBasis, maps: list, points: tuple[np.ndarray, np.ndarray], *,
+                     min_kept: float = MIN_POINTS_KEPT, known_distortions: Sequence[float | None] = ()) -> BestMap:
     """The least distorted of several refined maps (``map_distortion``) among those that keep the given points:
     ``maps[0]`` (the map made from them) always qualifies, any other one (e.g. the automatic map of the same pair)
     when ``points_agreement`` >= ``min_kept``. So given points never make a map worse than the automatic one when
     that one agrees with them (points placed a little off on a scan pull the map made from them).
 
-    Args: maps: [(n_s,) int local ids], refined; points_source, points_target: (L,) int local ids;
+    Args: maps: [(n_s,) int local ids], refined; points: (template ids (L,) int, target ids (L,) int), local;
         known_distortions: ``map_distortion`` of the first maps when already computed (None: not known).
     Returns: ``BestMap`` over the qualifying maps (distortions of the others: inf).
     """
@@ -522,7 +523,7 @@ def best_with_points(source: MeshBasis, target: MeshBasis, maps: list, points_so
     known = list(known_distortions) + [None] * (len(maps) - len(known_distortions))
 
     def score(i: int, m: np.ndarray) -> float:
-        if i and points_agreement(target, m, points_source, points_target) < min_kept:
+        if i and points_agreement(target, m, points) < min_kept:
             return float("inf")
         return known[i] if known[i] is not None else map_distortion(source, target, m)
 
@@ -532,13 +533,12 @@ def best_with_points(source: MeshBasis, target: MeshBasis, maps: list, points_so
 
 
 def with_alternative(source: MeshBasis, target: MeshBasis, best: BestMap, alternative: np.ndarray,
-                     points_source: np.ndarray, points_target: np.ndarray,
-                     refine: str | Sequence | None = None) -> BestMap:
+                     points: tuple[np.ndarray, np.ndarray], refine: str | Sequence | None = None) -> BestMap:
     """``best`` (the refined map made from given points) or ``alternative``, whichever ``best_with_points`` keeps.
 
     Args: best: ``refine_best``'s result for the map made from the points; alternative: (n_s original,) int another
         dense map of the same pair in original ids (-1 off the kept component), e.g. the automatic one;
-        points_source, points_target: (L,) int local ids of the given points; refine: the plan that refined
+        points: (template ids (L,) int, target ids (L,) int), local, the given points; refine: the plan that refined
         ``best`` with the points held (``refine_best(points=)``), or None: an alternative that is kept is then
         held to the points the same way (``hold_points``), so the kept map sends them where they are given. The
         two are compared as they come: holding a map runs the registration once more, which lowers any map's
@@ -547,10 +547,10 @@ def with_alternative(source: MeshBasis, target: MeshBasis, best: BestMap, altern
     Returns: ``BestMap`` of the two (index 1: the alternative was kept).
     """
     other = map_to_local(source, target, alternative)
-    kept = best_with_points(source, target, [best.p2p, other], points_source,
-                            points_target, known_distortions=(best.distortions[best.index],))
+    kept = best_with_points(source, target, [best.p2p, other], points,
+                            known_distortions=(best.distortions[best.index],))
     if kept.index == 1 and refine is not None:
-        kept = replace(kept, p2p=hold_points(source, target, kept.p2p, refine, (points_source, points_target)))
+        kept = replace(kept, p2p=hold_points(source, target, kept.p2p, refine, points))
     return kept
 
 

@@ -325,8 +325,8 @@ def test_points_agreement_counts_the_given_points_a_map_keeps(pair):
 
     S, T = pair
     points = S.samples[:6]
-    assert points_agreement(T, np.arange(S.n), points, points) == 1.0
-    assert points_agreement(T, _turned_map(S, T), points, points) <= 0.5
+    assert points_agreement(T, np.arange(S.n), (points, points)) == 1.0
+    assert points_agreement(T, _turned_map(S, T), (points, points)) <= 0.5
 
 
 def _thin_plate(n: int = 17, thickness: float = 0.02):
@@ -373,10 +373,10 @@ def test_best_with_points_takes_a_less_distorted_map_only_if_it_keeps_the_given_
     S, T = pair
     truth, turned = np.arange(S.n), _turned_map(S, T)
     points = S.samples[:6]
-    kept = best_with_points(S, T, [turned, truth], points, points)          # the true map keeps the points
+    kept = best_with_points(S, T, [turned, truth], (points, points))          # the true map keeps the points
     assert kept.index == 1 and np.array_equal(kept.p2p, truth)
-    assert best_with_points(S, T, [truth, turned], points, points).index == 0
-    lying = best_with_points(S, T, [turned, truth], points, _turned_map(S, T)[points])   # points given turned
+    assert best_with_points(S, T, [truth, turned], (points, points)).index == 0
+    lying = best_with_points(S, T, [turned, truth], (points, _turned_map(S, T)[points]))   # points given turned
     assert lying.index == 0 and np.isinf(lying.distortions[1])             # the other map does not keep them
 
 
@@ -390,7 +390,7 @@ def test_with_alternative_keeps_the_alternative_only_when_best_with_points_would
     from_points = refine.BestMap(turned, 0, (refine.map_distortion(S, T, turned),))
     scored = []
     monkeypatch.setattr(refine, "map_distortion", lambda s, t, m: scored.append(m) or 0.0)
-    kept = refine.with_alternative(S, T, from_points, map_to_original(S, T, truth), points, points)
+    kept = refine.with_alternative(S, T, from_points, map_to_original(S, T, truth), (points, points))
     assert kept.index == 1 and np.array_equal(kept.p2p, truth)
     assert len(scored) == 1 and kept.distortions[0] == from_points.distortions[0]   # map 0's distortion reused
 
@@ -407,12 +407,12 @@ def test_a_kept_alternative_is_held_to_the_points(pair, monkeypatch):
     points = (S.samples[:4], truth[S.samples[:4]].copy())
     points[1][0] = int(np.argsort(np.linalg.norm(T.V - T.V[points[1][0]], axis=1))[1])   # a vertex off the truth
     from_points = refine.BestMap(turned, 0, (np.inf,))
-    held = refine.with_alternative(S, T, from_points, map_to_original(S, T, truth), *points, refine="spectral+deform")
+    held = refine.with_alternative(S, T, from_points, map_to_original(S, T, truth), points, refine="spectral+deform")
     assert held.index == 1 and np.array_equal(held.p2p[points[0]], points[1])
     assert np.array_equal(held.p2p, refine.hold_points(S, T, truth, "spectral+deform", points))
     runs = []
     monkeypatch.setattr(refine.RefineStep, "run", lambda *a, **k: runs.append(a) or a[3])
-    refine.with_alternative(S, T, refine.BestMap(truth, 0, (0.0,)), map_to_original(S, T, turned), *points,
+    refine.with_alternative(S, T, refine.BestMap(truth, 0, (0.0,)), map_to_original(S, T, turned), points,
                             refine="deform")
     assert not runs                                                        # turned keeps no point: not refined
 
