@@ -150,13 +150,64 @@ def _digest_and_refs(obj: Any) -> tuple[str, frozenset]:
 
 
 def _hash_tree(tree: ast.AST) -> str:
-    return hashlib.blake2b(ast.dump(tree, include_attributes=False).encode(), digest_size=16).hexdigest()
+    return _hash_text(ast.dump(tree, include_attributes=False))
+
+
+def _hash_text(text: str) -> str:
+    return hashlib.blake2b(text.encode(), digest_size=16).hexdigest()
+
+
+_WITH_DOCSTRING = (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef, ast.Module)
+
+
+def _without_docstring(body: list) -> list:
+    """A statement list without its leading docstring, as ``_strip_docstrings`` leaves it."""
+    if body and isinstance(body[0], ast.Expr) and isinstance(getattr(body[0], "value", None), ast.Constant) \
+            and isinstance(body[0].value.value, str):
+        return body[1:] or [ast.Pass()]
+    return body
+
+
+def _dump_without_docstrings(tree: ast.AST, *, undecorated: ast.AST | None = None) -> str:
+    """``ast.dump(tree)`` (no attributes) of ``tree`` as ``_strip_docstrings`` would leave it, with the
+    decorators of the node ``undecorated`` left out, without changing ``tree`` (a cached module's, shared)."""
+
+    def text(node) -> str:
+        if isinstance(node, ast.AST):
+            cls = type(node)
+            args = []
+            for name in node._fields:
+                try:
+                    value = getattr(node, name)
+                except AttributeError:
+                    continue
+                if value is None and getattr(cls, name, ...) is None:
+                    continue
+                if name == "body" and isinstance(node, _WITH_DOCSTRING):
+                    value = _without_docstring(value)
+                elif name == "decorator_list" and node is undecorated:
+                    value = []
+                args.append(f"{name}={text(value)}")
+            return f"{cls.__name__}({', '.join(args)})"
+        if isinstance(node, list):
+            return f"[{', '.join(text(x) for x in node)}]"
+        return repr(node)
+
+    return text(tree)
 
 
 def _ast_digest(obj: Any) -> tuple[str, ast.AST | None]:
     """Digest of ``obj``'s source without docstrings and without the decorators of the object itself (its
     registration is wiring, not computation); the tree returned keeps those decorators, so that a project
-    decorator's code is followed."""
+    decorator's code is followed.
+
+    A definition at a module's top level is hashed from the module's parsed tree (the tree its own text would
+    parse to); a nested one from its text, dedented as before (dedenting also changes the multi-line strings
+    inside it)."""
+    node, _ = _definition_node(obj)
+    if node is not None and node.col_offset == 0:
+        wrapped = ast.Module(body=[node], type_ignores=[])
+        return _hash_text(_dump_without_docstrings(wrapped, undecorated=node)), wrapped
     try:
         src = textwrap.dedent(_source(obj))
         tree = _strip_docstrings(ast.parse(src))
@@ -366,7 +417,7 @@ def _module_digest(name: str) -> str:
         tree = _module_tree(name)
         if tree is None:
             return hashlib.blake2b(f"unreadable:{name}".encode(), digest_size=16).hexdigest(), frozenset()
-        return _hash_tree(_strip_docstrings(tree)), frozenset()
+        return _hash_text(_dump_without_docstrings(tree)), frozenset()
 
     return _memoized(("module", name, stamp), stamp and f"v{_TABLE_VERSION}:{stamp}:module:{name}", compute)[0]
 

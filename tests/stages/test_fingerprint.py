@@ -419,23 +419,58 @@ def _tree(text: str) -> str:
         return f"{type(e).__name__}: {e.msg}"
 
 
-def test_the_source_cut_from_the_module_gives_inspects_tree_for_every_project_definition():
-    import inspect
+def _digest_from_text(obj, text: str):
+    """(digest, references) of ``obj`` from ``text``, its ``inspect.getsource``, the fingerprint's way before it
+    read definitions from parsed modules: dedented and parsed, docstrings stripped, the object's own decorators
+    left out of the digest; None when the text does not parse."""
+    import ast
 
-    from stages.fingerprint import _definition_node, _source
+    from stages import fingerprint
+
+    try:
+        tree = fingerprint._strip_docstrings(ast.parse(textwrap.dedent(text)))
+    except SyntaxError:
+        return None
+    outer = tree.body[0]
+    decorators, outer.decorator_list = outer.decorator_list, []
+    digest = fingerprint._hash_tree(tree)
+    outer.decorator_list = decorators
+    return digest, fingerprint._references(tree, fingerprint._package_of(obj))
+
+
+def test_every_project_definition_is_read_and_hashed_as_from_inspects_text_and_modules_stay_as_parsed():
+    """For every function and class of the project: the source cut from its module parses to the tree of
+    ``inspect.getsource``'s text, and its digest and references (top-level definitions are hashed from the
+    module's tree, without a copy) are those of that text; every module's digest is that of its file, and its
+    cached tree is left as parsed."""
+    import ast
+    import inspect
+    import sys
+
+    from stages import fingerprint
 
     definitions = _project_definitions()
-    cut = [d for d in definitions if _definition_node(d)[0] is not None]
+    cut = [d for d in definitions if fingerprint._definition_node(d)[0] is not None]
     assert len(definitions) > 1000 and len(cut) > 0.8 * len(definitions), (len(definitions), len(cut))
     differ = []
     for d in definitions:
         try:
-            expected = _tree(inspect.getsource(d))
+            text = inspect.getsource(d)
         except (OSError, TypeError):              # dataclass-made methods: no source
             continue
-        if _tree(_source(d)) != expected:
-            differ.append(f"{d.__module__}.{d.__qualname__}")
+        if _tree(fingerprint._source(d)) != _tree(text):
+            differ.append(f"source of {d.__module__}.{d.__qualname__}")
+        expected = _digest_from_text(d, text)
+        digest, tree = fingerprint._ast_digest(d)
+        if expected is not None and (digest, fingerprint._references(tree, fingerprint._package_of(d))) != expected:
+            differ.append(f"digest of {d.__module__}.{d.__qualname__}")
     assert not differ, differ
+    for name in sorted({d.__module__ for d in definitions}):
+        with open(sys.modules[name].__file__, encoding="utf-8") as f:
+            text = f.read()
+        digest = fingerprint._module_digest(name)
+        assert ast.dump(fingerprint._module_tree(name)) == ast.dump(ast.parse(text)), name
+        assert digest == fingerprint._hash_tree(fingerprint._strip_docstrings(ast.parse(text))), name
 
 
 @pytest.mark.parametrize("switch", [True, False])
