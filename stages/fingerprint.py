@@ -59,13 +59,22 @@ def _is_project(obj: Any, project: frozenset) -> bool:
     return _in_project(_module_name(obj), project)
 
 
+_WITH_DOCSTRING = (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef, ast.Module)
+
+
+def _without_docstring(body: list) -> list:
+    """A statement list without its leading docstring (a lone docstring leaves ``pass``)."""
+    if body and isinstance(body[0], ast.Expr) and isinstance(getattr(body[0], "value", None), ast.Constant) \
+            and isinstance(body[0].value.value, str):
+        return body[1:] or [ast.Pass()]
+    return body
+
+
 def _strip_docstrings(tree: ast.AST) -> ast.AST:
+    """``tree`` with the docstring of each module, class and function removed, in place."""
     for node in ast.walk(tree):
-        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef, ast.Module)):
-            body = node.body
-            if body and isinstance(body[0], ast.Expr) and isinstance(getattr(body[0], "value", None), ast.Constant) \
-                    and isinstance(body[0].value.value, str):
-                node.body = body[1:] or [ast.Pass()]
+        if isinstance(node, _WITH_DOCSTRING):
+            node.body = _without_docstring(node.body)
     return tree
 
 
@@ -157,17 +166,6 @@ def _hash_text(text: str) -> str:
     return hashlib.blake2b(text.encode(), digest_size=16).hexdigest()
 
 
-_WITH_DOCSTRING = (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef, ast.Module)
-
-
-def _without_docstring(body: list) -> list:
-    """A statement list without its leading docstring, as ``_strip_docstrings`` leaves it."""
-    if body and isinstance(body[0], ast.Expr) and isinstance(getattr(body[0], "value", None), ast.Constant) \
-            and isinstance(body[0].value.value, str):
-        return body[1:] or [ast.Pass()]
-    return body
-
-
 def _dump_without_docstrings(tree: ast.AST, *, undecorated: ast.AST | None = None) -> str:
     """``ast.dump(tree)`` (no attributes) of ``tree`` as ``_strip_docstrings`` would leave it, with the
     decorators of the node ``undecorated`` left out, without changing ``tree`` (a cached module's, shared)."""
@@ -204,12 +202,12 @@ def _ast_digest(obj: Any) -> tuple[str, ast.AST | None]:
     A definition at a module's top level is hashed from the module's parsed tree (the tree its own text would
     parse to); a nested one from its text, dedented as before (dedenting also changes the multi-line strings
     inside it)."""
-    node, _ = _definition_node(obj)
+    node, lines = _definition_node(obj)
     if node is not None and node.col_offset == 0:
         wrapped = ast.Module(body=[node], type_ignores=[])
         return _hash_text(_dump_without_docstrings(wrapped, undecorated=node)), wrapped
     try:
-        src = textwrap.dedent(_source(obj))
+        src = textwrap.dedent(_definition_text(node, lines) if node is not None else inspect.getsource(obj))
         tree = _strip_docstrings(ast.parse(src))
         outer = next((node for node in ast.walk(tree)
                       if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))), None)
@@ -223,7 +221,7 @@ def _ast_digest(obj: Any) -> tuple[str, ast.AST | None]:
                 outer.decorator_list = decorators
         return digest, tree
     except (OSError, TypeError, SyntaxError):
-        return hashlib.blake2b(repr(getattr(obj, "__code__", obj)).encode(), digest_size=16).hexdigest(), None
+        return _hash_text(repr(getattr(obj, "__code__", obj))), None
 
 
 def _package_of(obj: Any) -> str:
@@ -379,10 +377,17 @@ def _source(obj: Any) -> str:
 
     Raises OSError or TypeError as ``inspect.getsource``."""
     node, lines = _definition_node(obj)
-    if node is None:
-        return inspect.getsource(obj)
-    first = min([node.lineno] + [d.lineno for d in node.decorator_list])
-    return "".join(lines[first - 1:node.end_lineno])
+    return _definition_text(node, lines) if node is not None else inspect.getsource(obj)
+
+
+def _definition_text(node: ast.AST, lines: list[str]) -> str:
+    """The lines of a def or class node of a module, from its first decorator to its end."""
+    return "".join(lines[_first_line(node) - 1:node.end_lineno])
+
+
+def _first_line(node: ast.AST) -> int:
+    """The line a def or class statement starts on: its first decorator's (``co_firstlineno`` of a function)."""
+    return min([node.lineno] + [d.lineno for d in node.decorator_list])
 
 
 def _definition_node(obj: Any) -> tuple[ast.AST | None, list[str]]:
@@ -405,7 +410,7 @@ def _definition_node(obj: Any) -> tuple[ast.AST | None, list[str]]:
     if code is None or code.co_filename != source.path:
         return None, []
     functions = [n for n in candidates if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))
-                 and min([n.lineno] + [d.lineno for d in n.decorator_list]) == code.co_firstlineno]
+                 and _first_line(n) == code.co_firstlineno]
     return (functions[0], source.lines) if len(functions) == 1 else (None, [])
 
 
@@ -416,7 +421,7 @@ def _module_digest(name: str) -> str:
     def compute():
         tree = _module_tree(name)
         if tree is None:
-            return hashlib.blake2b(f"unreadable:{name}".encode(), digest_size=16).hexdigest(), frozenset()
+            return _hash_text(f"unreadable:{name}"), frozenset()
         return _hash_text(_dump_without_docstrings(tree)), frozenset()
 
     return _memoized(("module", name, stamp), stamp and f"v{_TABLE_VERSION}:{stamp}:module:{name}", compute)[0]

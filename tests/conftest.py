@@ -1,7 +1,6 @@
 """Shared fixtures: a real dask LocalCluster for the whole session, and helpers for engine tests."""
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import sys
@@ -31,31 +30,17 @@ threadpoolctl.threadpool_limits(1)
 os.environ["STAGES_PLUGINS"] = ",".join(filter(None, [os.environ.get("STAGES_PLUGINS", ""), SYNTHETIC_PLUGIN]))
 
 
-@contextlib.contextmanager
-def environment(values: dict):
-    """os.environ with ``values`` set (None: unset) inside the block, restored after it."""
-    before = {var: os.environ.get(var) for var in values}
-    try:
-        _set_environ(values)
-        yield
-    finally:
-        _set_environ(before)
-
-
-def _set_environ(values: dict) -> None:
-    for var, value in values.items():
-        if value is None:
-            os.environ.pop(var, None)
-        else:
-            os.environ[var] = value
-
-
 @pytest.fixture(scope="session")
 def dask_client(tmp_path_factory):
     """A real LocalCluster (2 worker processes, 1 thread each) shared by the engine tests."""
     from stages.execute import make_client
 
-    with environment(_ENVIRON_BEFORE):   # the workers' one thread must come from the engine, not from this file
+    with pytest.MonkeyPatch.context() as mp:   # the workers' one thread must come from the engine, not this file
+        for var, value in _ENVIRON_BEFORE.items():
+            if value is None:
+                mp.delenv(var, raising=False)
+            else:
+                mp.setenv(var, value)
         client = make_client(workers=2, local_dir=str(tmp_path_factory.mktemp("dask")))
     yield client
     cluster = client.cluster
