@@ -216,11 +216,11 @@ _REPORTS = (("descriptor", "descriptor", "all"), ("descriptor_sparse", "descript
             ("mobius_all", "mobius_votes", "all"))
 
 
-def _write_frequency_figure(label: str, report: dict, rows: list[str], out_dir: str) -> None:
+def _frequency_figure(label: str, report: dict, rows: list[str], out_dir: str) -> tuple:
+    """``plotting.plot_frequency_matrices``'s entry for one method's accumulated frequency matrix."""
     title = (f"{label}: accumulated correspondences ({len(report['per_mesh'])} meshes, "
              f"accuracy {report['accuracy']:.3f})")
-    plotting.plot_frequency_matrix(report["frequency"], rows, rows, title,
-                                   os.path.join(out_dir, f"frequency_{label}.png"))
+    return report["frequency"], rows, rows, title, os.path.join(out_dir, f"frequency_{label}.png")
 
 
 def _dense_report(mobius_votes: dict, out_dir: str) -> dict:
@@ -289,8 +289,9 @@ def evaluate(landmarks, sparse_landmarks, descriptor=None, mrf=None, mrf_oriente
     dense_method_reports, dense_out = dense_reports(names, dense_sparse, dense_auto, dense_measures, out_dir)
     reports.update(dense_method_reports)
     sparse_rows = {label for label, _, key in _REPORTS if key == "sparse"}
-    for label, report in reports.items() if frequency_figures else ():
-        _write_frequency_figure(label, report, sparse_names if label in sparse_rows else names, out_dir)
+    if frequency_figures:
+        plotting.plot_frequency_matrices([_frequency_figure(label, report, sparse_names if label in sparse_rows
+                                                            else names, out_dir) for label, report in reports.items()])
     with open(os.path.join(out_dir, "correspondences.json"), "w", encoding="utf-8") as fh:
         json.dump({"landmarks": names, "sparse_landmarks": sparse_names,
                    "matrices": {k: r["matrices"] for k, r in reports.items()}}, fh)

@@ -61,3 +61,43 @@ def test_a_tightly_laid_out_figure_is_drawn_once_when_saved(tmp_path, monkeypatc
     F = frequency_matrix([correspondence_matrix(np.array([0, 2, 1]), 3)])
     plotting.plot_frequency_matrix(F, ["a", "b", "c"], ["a", "b", "c"], "t", tmp_path / "f.png")
     assert len(draws) == 1
+
+
+def _pixels(path) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(path).convert("RGBA"), dtype=np.int16)
+
+
+def _whole_drawing(freq, names, title, path) -> None:
+    """The frequency figure drawn whole by matplotlib (``savefig``), as ``plot_frequency_matrix`` drew it before
+    figures were shared."""
+    from corr_core.plotting import charts
+
+    fig, ax, image = charts._frequency_figure(names, names, max(1.0, float(freq.max())))
+    image.set_data(freq)
+    charts._frequency_cells(ax, freq)
+    ax.set_title(title)
+    charts.save_figure(fig, path, charts.FREQUENCY_DPI)
+
+
+def test_frequency_matrices_drawn_together_are_each_drawn_as_alone(tmp_path, monkeypatch):
+    """A figure shared by matrices with the same names is drawn whole once; each image then has the pixels of
+    its matrix's figure drawn whole by matplotlib: its own cells, numbers and title, nothing of the one before."""
+    from matplotlib.figure import Figure
+
+    names, sparse = [f"landmark {i}" for i in range(6)], ["a", "b"]
+    rng = np.random.default_rng(0)
+    mats = [np.where(rng.random((6, 6)) > 0.6, rng.random((6, 6)), 0.0) for _ in range(3)]
+    entries = [(m, names, f"method {i}: {i} meshes", tmp_path / f"m{i}.png") for i, m in enumerate(mats)]
+    entries.append((np.eye(2), sparse, "method 0: 0 meshes", tmp_path / "s.png"))
+    draws = []
+    real_draw = Figure.draw
+    monkeypatch.setattr(Figure, "draw", lambda self, renderer: (draws.append(1), real_draw(self, renderer))[1])
+    plotting.plot_frequency_matrices([(m, rows, rows, title, path) for m, rows, title, path in entries])
+    assert len(draws) == 2                                     # one whole drawing per set of names
+    monkeypatch.setattr(Figure, "draw", real_draw)
+    for freq, rows, title, path in entries:
+        _whole_drawing(freq, rows, title, tmp_path / "whole.png")
+        assert np.array_equal(_pixels(path), _pixels(tmp_path / "whole.png")), path.name
+    assert not np.array_equal(_pixels(tmp_path / "m1.png"), _pixels(tmp_path / "m0.png"))
