@@ -276,13 +276,45 @@ def _label_points(fig, ax, xy: np.ndarray, texts: list[str], colours: list[str],
     everything = np.concatenate([pts, to_px(np.asarray(others, float).reshape(-1, 2))]) if len(others) else pts
     centres, leader = place_labels(everything, np.array(sizes + [(0.0, 0.0)] * (len(everything) - len(pts))),
                                    (box.x0, box.y0, box.x1, box.y1), dot=4.5 * px_per_pt, step=5 * px_per_pt)
+    from matplotlib.lines import Line2D
+
+    to_data = ax.transData.inverted().transform
     for i, t in enumerate(texts):
         offset = (centres[i] - pts[i]) / px_per_pt
         ax.annotate(t, xy[i], xytext=tuple(offset), textcoords="offset points", ha="center", va="center",
                     fontsize=LABEL_PT, fontweight="bold", color=colours[i], alpha=alphas[i], gid="landmark-label",
-                    annotation_clip=False,
-                    arrowprops=dict(arrowstyle="-", lw=0.7, color="#444", alpha=alphas[i], shrinkA=0, shrinkB=2)
-                    if leader[i] else None)
+                    annotation_clip=False)
+        text_half = (np.asarray(label_sizes[t]) - 3) / 2 + LEADER_GAP_PT * px_per_pt
+        ends = leader_line(centres[i], pts[i], text_half, LEADER_SHRINK_PT * px_per_pt) if leader[i] else None
+        if ends is not None:
+            (x0, y0), (x1, y1) = to_data(ends)
+            ax.add_artist(Line2D([x0, x1], [y0, y1], lw=0.7, color="#444", alpha=alphas[i], solid_capstyle="butt",
+                                 zorder=3, clip_on=False, gid="leader"))
+
+
+LEADER_GAP_PT = 2.0      # a leader line stops this far from its label's text (as matplotlib's annotation arrows)
+LEADER_SHRINK_PT = 2.0   # ... and this far short of its point
+
+
+def leader_line(centre: np.ndarray, point: np.ndarray, half_size: np.ndarray, shrink: float) -> np.ndarray | None:
+    """The segment joining a label to its point, in display pixels: from where the line from the label's centre
+    to the point leaves the label's box to ``shrink`` short of the point; None when the point is that close to
+    the box (nothing to draw).
+
+    Args: centre: (2,) the label's centre; point: (2,); half_size: (2,) half the width and height of the box;
+        shrink: pixels. Returns (2,2) [start, end] or None.
+    """
+    centre, point = np.asarray(centre, float), np.asarray(point, float)
+    direction = point - centre
+    length = float(np.hypot(*direction))
+    if length == 0.0:
+        return None
+    with np.errstate(divide="ignore"):
+        leave = float(np.min(np.where(direction != 0, np.asarray(half_size, float) / np.abs(direction), np.inf)))
+    start, end = centre + min(leave, 1.0) * direction, point - shrink / length * direction
+    if np.dot(end - start, direction) <= 0:
+        return None
+    return np.stack([start, end])
 
 
 def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, predictions: dict,
@@ -394,24 +426,31 @@ def plot_landmark_panels(template: tuple, poses: dict, landmark_vids: dict, pred
         lax.text(0.02, 0.5, "\n".join(f"{i + 1:>2} {n}" for i, n in enumerate(names)), fontsize=LABEL_PT,
                  va="center", ha="left", family="monospace", transform=lax.transAxes)
     fig.suptitle(suptitle, fontsize=10)
-    save_figure(fig, path, 90, tight_rect=None, close=False)
-    drawn = _drawn(fig, [(ax, title_of(k)) for k, ax in enumerate(a for a, *_ in labelled)])
+    save_figure(fig, path, LANDMARK_DPI, tight_rect=None, close=False)
+    drawn = _drawn(fig, [(ax, title_of(k)) for k, ax in enumerate(a for a, *_ in labelled)], LANDMARK_DPI)
     plt.close(fig)
     return drawn
 
 
-def _drawn(fig, axes: list) -> dict:
-    """What a saved landmark figure shows, read back from its artists: {"wrong_lines": [(panel, (x0, y0, x1, y1))
-    in image pixels], "labels": [(panel, text, font size pt, (x0, y0, x1, y1) display pixels)]}."""
+LANDMARK_DPI = 90
+
+
+def _drawn(fig, axes: list, dpi: float) -> dict:
+    """What a landmark figure saved at ``dpi`` shows, read back from its artists: {"wrong_lines": [(panel, (x0, y0,
+    x1, y1)) in image pixels], "labels": [(panel, text, font size pt, (x0, y0, x1, y1) saved pixels from the
+    bottom left)], "leaders": [(panel, (x0, y0, x1, y1) saved pixels: label end, point end)]}."""
     from matplotlib.text import Text
 
     renderer = fig.canvas.get_renderer()
-    out = {"wrong_lines": [], "labels": []}
+    out = {"wrong_lines": [], "labels": [], "leaders": []}
     for ax, panel in axes:
         for line in ax.lines:
             if line.get_gid() == "wrong-to-true":
                 (x0, x1), (y0, y1) = line.get_xdata(), line.get_ydata()
                 out["wrong_lines"].append((panel, (float(x0), float(y0), float(x1), float(y1))))
+            elif line.get_gid() == "leader":
+                (x0, y0), (x1, y1) = ax.transData.transform(np.column_stack(line.get_data())) * (dpi / fig.dpi)
+                out["leaders"].append((panel, (float(x0), float(y0), float(x1), float(y1))))
         for t in ax.texts:
             if t.get_gid() == "landmark-label":
                 bb = Text.get_window_extent(t, renderer)     # the text's own box (not its leader line)

@@ -168,6 +168,31 @@ def test_landmark_figure_one_known_mistake(tmp_path):
                 a, b = boxes[i], boxes[j]
                 overlap = min(a[2], b[2]) - max(a[0], b[0]), min(a[3], b[3]) - max(a[1], b[1])
                 assert min(overlap) <= 0.5, f"{panel}: labels {i + 1} and {j + 1} overlap"
+    # labels moved away from their crowded points are joined to them: each leader points back at its label's
+    # centre and leaves from the edge of that label's text box (2 pt of air), ending outside every label
+    leaders = drawn["leaders"]
+    assert leaders
+    air = pm.LEADER_GAP_PT * pm.LANDMARK_DPI / 72
+    for panel, (x0, y0, x1, y1) in leaders:
+        boxes = [np.asarray(b) for p, _, _, b in labels if p == panel]
+        start, along = np.array([x0, y0]), np.array([x1 - x0, y1 - y0]) / np.hypot(x1 - x0, y1 - y0)
+        centres = [((b[0] + b[2]) / 2, (b[1] + b[3]) / 2) for b in boxes]
+        behind = [(np.dot(start - c, along), b) for c, b in zip(centres, boxes)
+                  if abs(along[0] * (c[1] - start[1]) - along[1] * (c[0] - start[0])) < 1.0 and np.dot(start - c, along) >= 0]
+        assert behind, (panel, (x0, y0))
+        _, own = min(behind, key=lambda db: db[0])             # the label the leader comes from
+        half = (own[2:] - own[:2]) / 2 + air
+        gap = np.abs(start - (own[:2] + own[2:]) / 2) - half  # on the box's edge: 0 along one axis, <= 0 the other
+        assert abs(max(gap)) < 1.0, (panel, (x0, y0), own)
+        assert not any(b[0] < x1 < b[2] and b[1] < y1 < b[3] for b in boxes), (panel, (x1, y1))
+
+
+def test_leader_line_runs_from_the_label_box_edge_to_just_short_of_the_point():
+    assert np.allclose(pm.leader_line([0, 0], [10, 0], [2, 1], 1.0), [[2, 0], [9, 0]])
+    assert np.allclose(pm.leader_line([0, 0], [10, 5], [2, 1], 0.0), [[2, 1], [10, 5]])   # leaves by the top
+    assert np.allclose(pm.leader_line([0, 0], [0, -4], [2, 1], 1.0), [[0, -1], [0, -3]])
+    assert pm.leader_line([0, 0], [1.5, 0], [2, 1], 0.5) is None      # the point is inside the box
+    assert pm.leader_line([0, 0], [2.4, 0], [2, 1], 0.5) is None      # ... or within the shrink of its edge
 
 
 @pytest.mark.parametrize("width", [2.5, 4.0, 9.0])
