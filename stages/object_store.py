@@ -241,15 +241,16 @@ class ObjectStore(Store):
         except OSError:
             return False
 
-    def has(self, key: str) -> bool:
+    def complete(self, key: str) -> dict | None:
+        """The manifest of a complete entry, else None: one GET of the manifest and one listing of its data."""
         manifest = self.manifest(key)
         if manifest is None:
-            return False
+            return None
         problem = self._missing_parts(key, manifest)
         if problem:
             self._warn_unusable(key, problem, manifest)
-            return False
-        return True
+            return None
+        return manifest
 
     def _missing_parts(self, key: str, manifest: dict) -> str | None:
         """What is wrong with the first array or file of the entry that is absent or has another size (one

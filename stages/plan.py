@@ -31,7 +31,7 @@ from .fingerprint import code_fingerprint
 from .generated import resolve_generated
 from .inputs import (DictInput, EntryInput, IndexPairsInput, InputSpec, PairsInput, SparsePairsInput, StackInput,
                      ValueInput)
-from .store import Store
+from .store import Store, left_out_of
 
 KEY_VERSION = 1
 
@@ -158,13 +158,8 @@ class Plan:
         the tasks of forced stages this run has not recomputed yet."""
         return list(self._missing())
 
-    def has_missing(self) -> bool:
-        """True when some task must run (``missing`` is not empty); stops at the first such task."""
-        return any(True for _ in self._missing())
-
     def _missing(self):
-        return (t for t in self.tasks() if self.is_forced(t) or not self.store.has(t.key)
-                or any(e[0] for e in self.store.left_out(t.key)))
+        return (t for t in self.tasks() if self.is_forced(t) or _incomplete(self.store.complete(t.key)))
 
     def is_forced(self, task: Task) -> bool:
         """True when ``task`` belongs to a forced stage and this run has not stored it yet."""
@@ -204,6 +199,11 @@ def build_plan(pipe: Pipeline) -> Plan:
         stages[name] = sp
         sources[name] = sp.source
     return Plan(pipe, store, stages, datasets, pending, hasher, damaged)
+
+
+def _incomplete(manifest: dict | None) -> bool:
+    """True when a stored result must be computed (again): there is none, or it left out failed items."""
+    return manifest is None or any(e[0] for e in left_out_of(manifest))
 
 
 def plan_pipeline(path: str, overrides=(), cache_dir=None, output_dir=None, quiet=False, targets=(),

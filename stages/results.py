@@ -4,6 +4,7 @@ from __future__ import annotations
 from typing import Any
 
 from .plan import Plan
+from .store import left_out_of
 
 
 def metrics(plan: Plan) -> dict:
@@ -27,11 +28,12 @@ def metrics(plan: Plan) -> dict:
         if sp.skipped is not None:
             merged.setdefault("_skipped", {})[name] = sp.skipped
         for t in sp.tasks:
-            if not plan.store.has(t.key):
+            manifest = plan.store.complete(t.key)
+            if manifest is None:
                 missing.append(name)
                 continue
             value = plan.store.get(t.key)
-            left_out = plan.store.left_out(t.key)
+            left_out = left_out_of(manifest)
             if left_out:  # computed without some failed items: say which, and why
                 merged.setdefault("_left_out", {})[name] = [{"item": failed, "why": why}
                                                             for _, failed, _, why in left_out]

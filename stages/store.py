@@ -114,14 +114,19 @@ class Store:
     def has(self, key: str) -> bool:
         """True when the entry is complete: its manifest is readable and matches its checksum, and every
         array folder and file it lists is present (file sizes checked; contents are checked on read)."""
+        return self.complete(key) is not None
+
+    def complete(self, key: str) -> dict | None:
+        """The manifest of a complete entry (see :meth:`has`), else None: one look at the store answers both
+        whether a result is there and what its manifest says (e.g. :func:`left_out_of`)."""
         manifest = self.manifest(key)
         if manifest is None:
-            return False
+            return None
         problem = self._missing_parts(key, manifest)
         if problem:
             self._warn_unusable(key, problem)
-            return False
-        return True
+            return None
+        return manifest
 
     def manifest(self, key: str) -> dict | None:
         """The entry's manifest, or None when it is missing or unusable (warned once, see :meth:`has`)."""
@@ -145,10 +150,9 @@ class Store:
         return doc
 
     def left_out(self, key: str) -> list[list[str]]:
-        """The items a stored result was computed without (``[[task key, failed task, item, why], ...]``, empty for a
-        complete result; see worker.run_task): recorded in the manifest's ``info``."""
-        manifest = self.manifest(key)
-        return list(manifest["info"].get("left_out", [])) if manifest is not None else []
+        """The items a stored result was computed without (:func:`left_out_of` its manifest; empty when there is
+        none)."""
+        return left_out_of(self.manifest(key))
 
     def _missing_parts(self, key: str, manifest: dict) -> str | None:
         """What is wrong with the first array or file of the entry that is absent or has another size, else None."""
@@ -323,6 +327,12 @@ class Store:
     def remove_stale(self, what: str) -> None:
         """Remove one item of :meth:`stale_writes`."""
         raise ValueError(f"{what}: a local cache has no stale writes")
+
+
+def left_out_of(manifest: dict | None) -> list[list[str]]:
+    """The items a stored result was computed without (``[[task key, failed task, item, why], ...]``, empty for a
+    complete result or no manifest; see worker.run_task): recorded in the manifest's ``info``."""
+    return list(manifest["info"].get("left_out", [])) if manifest is not None else []
 
 
 def disk_usage(path: str) -> int:

@@ -22,7 +22,7 @@ from .inputs import (DictInput, InputError, InputSpec, PairsInput, SparsePairsIn
                      partial_pairs, partial_tile)
 from .logs import configure_logging
 from .skipped import Skipped
-from .store import Store
+from .store import Store, left_out_of
 
 
 class TaskStatus(enum.Enum):
@@ -176,8 +176,9 @@ def run_task(call: TaskCall, *upstream: TaskResult) -> TaskResult:
         return base.with_status(TaskStatus.SKIPPED, because=skip.because, error=skip.error)
     failed = {u.key: u for u in upstream if isinstance(u, TaskResult) and not u.status.succeeded}
     store = open_store(call.cache, warn=False)  # the client warns about unusable entries
-    if not call.force and store.has(call.key):
-        stored = tuple(tuple(e) for e in store.left_out(call.key))
+    manifest = None if call.force else store.complete(call.key)
+    if manifest is not None:
+        stored = tuple(tuple(e) for e in left_out_of(manifest))
         if stored == left_out:  # complete, or left out the same items as now
             return base.with_status(TaskStatus.CACHED, left_out=stored)
     fn = registry.get(call.function)

@@ -147,8 +147,9 @@ def plot_frequency_matrices(matrices) -> None:
 
     Matrices with the same names (and colour scale) share one figure: it is built, laid out (for the longest of
     their titles, so every title fits and the matrices line up from one image to the next) and drawn once without
-    its matrix; each matrix then only draws its cells, their numbers and its title over that drawing. Building,
-    laying out and drawing the names were three quarters of a figure's time.
+    its matrix; each matrix then only draws its cells, their numbers, the frame and its title over that drawing
+    (the pixels are those of a whole drawing). ``corr.evaluate``'s 8 figures of a 3-pose run: 5.57 -> 2.31 s
+    (cProfile, session 29).
 
     Args: matrices: [(freq (n,L) float, names_rows (n,) str, names_cols (L,) str, title str, path)]; a path not
         ending in .png is written by matplotlib (e.g. PDF), the figure drawn whole.

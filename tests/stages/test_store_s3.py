@@ -106,6 +106,33 @@ def test_run_noop_and_param_change_on_s3(project, tmp_path, s3fs_client, s3_endp
     assert (tmp_path / "results" / "syn" / "rep" / "summary.txt").read_text().startswith("synthetic: 8 items")
 
 
+def test_a_noop_run_asks_the_store_about_each_task_once(project, monkeypatch):
+    """A no-op run on an object store looks each task's result up once (its manifest and one listing of its
+    data): not once to decide whether to start workers and again to list what runs, nor again for its
+    ``left_out``. Each look-up is requests to the server, per task, on every run."""
+    from collections import Counter
+
+    from stages.object_store import ObjectStore
+
+    path, cache = project
+    run_quiet(path, cache_dir=cache)
+    asked: Counter = Counter()
+    manifest = ObjectStore.manifest
+
+    def counted(self, key):
+        asked[key] += 1
+        return manifest(self, key)
+    monkeypatch.setattr(ObjectStore, "manifest", counted)
+    assert set(executed(run_quiet(path, cache_dir=cache)).values()) == {0}
+    plan = api.plan_pipeline(str(path), cache_dir=cache, quiet=True)
+    assert set(asked) == {t.key for t in plan.tasks()}
+    per_item = {t.key: name for name, sp in plan.stages.items() if len(sp.tasks) > 1 for t in sp.tasks}
+    assert {"feat", "dist"} <= set(per_item.values())
+    assert {per_item[k]: n for k, n in asked.items() if k in per_item and n != 1} == {}
+    # the summary and the report are also read for the metrics and to publish their files
+    assert all(n <= 4 for n in asked.values()), asked
+
+
 DAMAGES = ("deleted", "truncated", "edited", "array-gone")
 
 
