@@ -327,7 +327,8 @@ def _free_threads(client, refresh_s: float = 1.0):
 
 
 def execute_rounds(plans: list[Plan], get_client, quiet: bool = False, key_suffix: str = "",
-                   log=None, missing: list[list[Task]] | None = None) -> tuple[list[Plan], Outcome, set[str]]:
+                   log=None, first_missing: list[tuple[Plan, list[Task]]] | None = None
+                   ) -> tuple[list[Plan], Outcome, set[str]]:
     """Run the misses of ``plans`` (sharing one store), in rounds: after a round, a plan with a stage waiting for
     a candidates stage whose result is now stored is planned again, and the new misses run; until no plan waits
     for a stored result. A candidates result found damaged while planning is invalidated (with a warning) and
@@ -336,10 +337,11 @@ def execute_rounds(plans: list[Plan], get_client, quiet: bool = False, key_suffi
     run and the first reason why (:func:`stages.status.run_lines`). Returns the final plans, the outcome of every
     task run, and the keys that were missing.
 
-    ``missing``: ``[pl.missing() for pl in plans]`` when the caller has just computed it (nothing run since): the
-    first round uses it instead of asking the store about every task again (on an object store, requests)."""
+    ``first_missing``: per plan, ``(the plan that listed them, its missing())`` when the caller has just listed them
+    (nothing run since): the first round uses them instead of asking the store about every task again (on an
+    object store, requests), for a plan that is still the one that listed them (not one planned again since)."""
     outcome, missing_all = Outcome(), set()
-    given = list(zip(plans, missing)) if missing is not None else []
+    given = first_missing or []
     for round_no in range(sum(len(pl.stages) for pl in plans) + 2):  # each round plans at least one more stage
         plans = [_without_damaged(pl, log) for pl in plans]
         owner: dict[str, tuple[Task, Plan]] = {}

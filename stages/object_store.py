@@ -241,17 +241,6 @@ class ObjectStore(Store):
         except OSError:
             return False
 
-    def complete(self, key: str) -> dict | None:
-        """The manifest of a complete entry, else None: one GET of the manifest and one listing of its data."""
-        manifest = self.manifest(key)
-        if manifest is None:
-            return None
-        problem = self._missing_parts(key, manifest)
-        if problem:
-            self._warn_unusable(key, problem, manifest)
-            return None
-        return manifest
-
     def _missing_parts(self, key: str, manifest: dict) -> str | None:
         """What is wrong with the first array or file of the entry that is absent or has another size (one
         listing of the writer's prefix), else None."""

@@ -110,17 +110,15 @@ def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None,
           else given_client(client_getter)) as get_client:
         # something will run: start the cluster while the generated datasets are written
         early = getattr(get_client, "start_early", None)
-        planned = plan
-        missing_now = None if plan.pending_generated else plan.missing()   # the first round's, when unchanged
-        plan = prepare(plan, log, on_claimed=early if early and (plan.pending_generated or missing_now) else None)
+        listed = None if plan.pending_generated else (plan, plan.missing())   # this plan's misses, for round one
+        plan = prepare(plan, log, on_claimed=early if early and (listed is None or listed[1]) else None)
         record_before = load_record(plan)
         verified: dict[str, dict[str, str]] = {}
         for attempt in range(max_repairs + 1):
             # in rounds: stages waiting for a candidates stage are planned (and run) once its result is stored
-            known = [missing_now] if attempt == 0 and plan is planned and missing_now is not None else None
             (plan,), outcome, missing = execute_rounds([plan], get_client, quiet=quiet, log=log if attempt == 0 else None,
                                                        key_suffix=f"-repair{attempt}" if attempt else "",
-                                                       missing=known)
+                                                       first_missing=[listed] if listed else None)
             missing_all |= missing
             results.update(outcome.results)
             corrupt: list[tuple[str, str]] = [(r.corrupt_key, r.error) for r in outcome.corrupt()]  # (key, what)

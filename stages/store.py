@@ -124,7 +124,7 @@ class Store:
             return None
         problem = self._missing_parts(key, manifest)
         if problem:
-            self._warn_unusable(key, problem)
+            self._warn_unusable(key, problem, manifest)
             return None
         return manifest
 
@@ -167,12 +167,16 @@ class Store:
                 return f"published file {rel} is missing"
         return None
 
-    def _warn_unusable(self, key: str, problem: str) -> None:
+    def _warn_unusable(self, key: str, problem: str, manifest: dict | None = None) -> None:
+        """Warn once that the entry ``key`` is unusable and why, naming its stage and item from ``manifest`` (else
+        from the last manifest read of it, if any)."""
         if self.warn:
             info = ""
-            hit = _MANIFESTS.get(self.manifest_path(key))
-            if hit is not None:
-                meta = hit[1].get("info", {})
+            if manifest is None:
+                hit = _MANIFESTS.get(self.manifest_path(key))
+                manifest = hit[1] if hit is not None else None
+            if manifest is not None:
+                meta = manifest.get("info", {})
                 info = f" ({meta.get('stage', '')}{'[' + meta['label'] + ']' if meta.get('label') else ''})"
             warn_once(f"cache entry {self.manifest_path(key)}{info}: {problem}; treating it as missing and "
                       "recomputing it")
