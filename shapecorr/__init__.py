@@ -1,13 +1,15 @@
 """The application's stage functions, registered with the engine through the ``stages.plugins`` entry point
-(``shapecorr = "shapecorr:PLUGIN"`` in pyproject.toml): importing this package registers them."""
+(``shapecorr = "shapecorr:PLUGIN"`` in pyproject.toml). Importing this package declares the plugin; the engine
+imports its ``modules`` (which register the ``align.*``, ``corr.*`` and ``generate.*`` functions) when a pipeline
+first names one of them, so commands on other plugins' pipelines do not import the scientific code."""
 from stages.registry import Headline, Measure, Plugin
-
-from . import alignment, correspondence, dense, generators  # noqa: F401  (importing registers the functions)
-from . import figures  # noqa: F401  (mesh pictures of the correspondences, recovered azimuths)
 
 PLUGIN = Plugin(
     name="shapecorr",
     packages=("corr_core", "shapecorr"),
+    modules=("shapecorr.alignment", "shapecorr.correspondence", "shapecorr.dense", "shapecorr.generators",
+             "shapecorr.figures"),   # figures: mesh pictures of the correspondences, recovered azimuths
+    namespaces=("align", "corr", "generate"),
     report_packages=("scipy", "open3d", "scikit-image", "potpourri3d", "robust_laplacian", "matplotlib"),
     groups={"alignment": "Problem 1: alignment", "correspondence": "Problem 2: correspondence"},
     headlines=(

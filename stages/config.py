@@ -419,7 +419,7 @@ def _read_generated(raw: dict, err, resolver: "_Resolver") -> dict[str, Generate
             raise err("a generated dataset needs 'generator:'", "generated", name,
                       fix=f"generators: {', '.join(registry.names('generator'))}")
         gen = spec["generator"]
-        if gen not in registry.names("generator"):
+        if registry.find(gen, "generator") is None:
             raise err(f"unknown generator '{gen}'", "generated", name, "generator",
                       fix=_suggest(gen, registry.names("generator")))
         params = resolver.resolve(dict(spec.get("params") or {}), ("generated", name, "params"))
@@ -535,13 +535,10 @@ def _read_stages(raw: dict, pipe: Pipeline, resolver: _Resolver, err) -> dict[st
         fname = st.get("function")
         if not fname:
             raise err("stage has no 'function:'", "stages", name, fix=_suggest("", registry.names("stage")))
-        try:
-            fn = registry.get(fname)
-            if fn.kind != "stage":
-                raise KeyError(fname)
-        except KeyError:
+        fn = registry.find(fname, "stage")
+        if fn is None:
             raise err(f"unknown function '{fname}'", "stages", name, "function",
-                      fix=_suggest(fname, registry.names("stage"))) from None
+                      fix=_suggest(fname, registry.names("stage")))
         if "foreach" in st and "pairs" in st:
             raise err("a stage has either 'foreach:' or 'pairs:', not both", "stages", name)
         over = st.get("foreach") or st.get("pairs")
@@ -621,7 +618,8 @@ def _read_candidates(st: dict, name: str, fn: registry.StageFunction, fanout: st
         raise err(f"'{cand}' is a dataset; 'candidates:' names a stage that returns the pairs", "stages", name,
                   "candidates", fix="name a once stage returning {'names': [...], 'pairs': (P, 2) int indices}")
     cand_function = (raw_stages[cand] or {}).get("function") if isinstance(raw_stages[cand], dict) else None
-    cand_fanout = registry.get(cand_function).fanout if cand_function in registry.names("stage") else "once"
+    cand_fn = registry.find(cand_function, "stage")
+    cand_fanout = cand_fn.fanout if cand_fn is not None else "once"
     if cand_fanout != "once":  # an unknown function is reported at its own stage
         raise err(f"stage '{cand}' runs per {cand_fanout}; the candidates stage must run once", "stages", name,
                   "candidates", fix="name a once stage returning {'names': [...], 'pairs': (P, 2) int indices}")

@@ -22,11 +22,13 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
+from . import registry
 from .errors import UserError, warn_once
 from .plan import Plan, Task, build_plan
 from .status import run_lines
 from .store import Store
 from .worker import TaskCall, TaskResult, TaskStatus, run_task
+from .worker_boot import WORKER_IMPORTS_ENV
 
 
 @dataclass
@@ -120,7 +122,8 @@ def make_client(workers: int = 2, scheduler: str | None = None, local_dir: str |
 
     The local cluster's dashboard listens on 127.0.0.1 only; ``log`` (a print-like function) receives its URL.
     Its worker processes ignore Ctrl-C: the client process alone handles it and shuts them down cleanly. Each
-    runs ``WORKER_PRELOAD`` when it starts (``stages.worker_boot``). May be called from a thread.
+    runs ``WORKER_PRELOAD`` when it starts (``stages.worker_boot``), importing the plugins this process has
+    imported so far (those of the pipeline it planned). May be called from a thread.
     dask's own log is kept to CRITICAL: a worker that dies is reported by ``execute`` as its task's failure, not
     by the surviving workers' connection-reset tracebacks.
 
@@ -140,7 +143,10 @@ def make_client(workers: int = 2, scheduler: str | None = None, local_dir: str |
     with _ctrl_c_ignored_by_children():
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                dashboard_address=DASHBOARD_ADDRESS, local_directory=local_dir,
-                               memory_limit=memory_limit, silence_logs=logging.CRITICAL)
+                               memory_limit=memory_limit, silence_logs=logging.CRITICAL,
+                               # the plugins of the pipeline being run (the nanny's env: the one setting that
+                               # the client's own environment, set by an earlier cluster, does not override)
+                               env={WORKER_IMPORTS_ENV: ",".join(registry.imported_plugins())})
     if log is not None and cluster.dashboard_link:
         log(f"dask dashboard: {cluster.dashboard_link}")
     return Client(cluster)

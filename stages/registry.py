@@ -107,6 +107,13 @@ class Plugin:
         headlines: the summary tables of the report (:class:`Headline`), in display order.
         sweep_metrics: the dotted metric keys ``sweep`` prints by default (and the report's sweep tables show);
             empty: the cells of the headline tables.
+        modules: the modules whose import registers the plugin's functions, imported only when a function of
+            the plugin is first looked up (see :func:`get`), so that a command on a pipeline of other plugins
+            does not pay their import (a second for a plugin of plotting and scientific code). Empty: the
+            plugin's own module registers everything when it is loaded.
+        namespaces: with ``modules``: the first dotted part of every name the plugin registers (``"corr"`` for
+            ``"corr.evaluate"``); looking up a name in one imports the plugin's modules. A name registered
+            outside them is an error when the modules are imported.
     """
     name: str
     packages: tuple[str, ...] = ()
@@ -114,6 +121,8 @@ class Plugin:
     groups: dict[str, str] = field(default_factory=dict)
     headlines: tuple[Headline, ...] = ()
     sweep_metrics: tuple[str, ...] = ()
+    modules: tuple[str, ...] = ()
+    namespaces: tuple[str, ...] = ()
 
     def owns(self, module: str) -> bool:
         """True when ``module`` is one of :attr:`packages` or inside one."""
@@ -153,6 +162,7 @@ class StageFunction:
 
 _REGISTRY: dict[str, StageFunction] = {}
 _PLUGINS: dict[str, Plugin] = {}
+_UNIMPORTED: dict[str, Plugin] = {}   # namespace -> the plugin whose ``modules`` register it, not imported yet
 _LOADED = False
 
 
@@ -232,8 +242,38 @@ def add_plugin(plugin: Plugin) -> Plugin:
     if not isinstance(plugin, Plugin):
         raise PipelineError(f"a plugin must be a stages.registry.Plugin, got {type(plugin).__name__}",
                             fix="declare PLUGIN = Plugin(name=..., packages=(...)) in the plugin's module")
+    if bool(plugin.modules) != bool(plugin.namespaces):
+        raise PipelineError(f"plugin '{plugin.name}' declares {'modules' if plugin.modules else 'namespaces'} "
+                            f"without {'namespaces' if plugin.modules else 'modules'}",
+                            fix="declare both (its functions are then imported when first named) or neither")
     _PLUGINS[plugin.name] = plugin
+    for namespace in plugin.namespaces:
+        _UNIMPORTED[namespace] = plugin
     return plugin
+
+
+def _import_modules(plugin: Plugin) -> None:
+    """Import the ``modules`` of a plugin that declares them (registering its functions), once."""
+    for namespace in plugin.namespaces:
+        _UNIMPORTED.pop(namespace, None)
+    before = set(_REGISTRY)
+    for module_name in plugin.modules:
+        try:
+            importlib.import_module(module_name)
+        except ImportError as exc:
+            raise PipelineError(f"cannot import module {module_name} of plugin '{plugin.name}': {exc}",
+                                fix="install what it imports, or fix the plugin's `modules`") from exc
+    stray = sorted(n for n in set(_REGISTRY) - before if n.split(".")[0] not in plugin.namespaces)
+    if stray:
+        raise PipelineError(f"plugin '{plugin.name}' registers {stray[0]!r} outside its namespaces "
+                            f"{', '.join(plugin.namespaces)}", fix="add its first dotted part to `namespaces`")
+
+
+def _import_all() -> None:
+    """Import every plugin's ``modules`` (all names are wanted: a listing, a suggestion)."""
+    load_library()
+    for plugin in list({p.name: p for p in _UNIMPORTED.values()}.values()):
+        _import_modules(plugin)
 
 
 def installed_plugins() -> list[importlib.metadata.EntryPoint]:
@@ -242,7 +282,8 @@ def installed_plugins() -> list[importlib.metadata.EntryPoint]:
 
 
 def load_library() -> None:
-    """Load every installed plugin (entry points) and the ones listed in ``STAGES_PLUGINS``, once."""
+    """Load every installed plugin (entry points) and the ones listed in ``STAGES_PLUGINS``, once (a plugin that
+    declares ``modules`` has them imported when one of its functions is first looked up)."""
     global _LOADED
     if _LOADED:
         return
@@ -258,6 +299,8 @@ def plugins(functions: Iterable[str] | None = None) -> list[Plugin]:
     load_library()
     if functions is None:
         return list(_PLUGINS.values())
+    functions = list(functions)
+    import_functions(functions)
     modules = {_REGISTRY[f].module for f in functions if f in _REGISTRY}
     return [p for p in _PLUGINS.values() if any(p.owns(m) for m in modules)]
 
@@ -287,14 +330,54 @@ def sweep_metrics(functions: Iterable[str] | None = None) -> list[str]:
 
 
 def get(name: str) -> StageFunction:
-    """The registered function ``name`` (KeyError if unknown)."""
+    """The registered function ``name`` (KeyError if unknown); its plugin's ``modules`` are imported first
+    when they are not yet."""
     load_library()
+    if name not in _REGISTRY and name.split(".")[0] in _UNIMPORTED:
+        _import_modules(_UNIMPORTED[name.split(".")[0]])
     return _REGISTRY[name]
+
+
+def find(name: Any, kind: str | None = None) -> StageFunction | None:
+    """The registered function ``name`` (of ``kind``, when given), or None: a check that imports only the
+    plugin the name belongs to, where :func:`names` would import them all."""
+    try:
+        fn = get(name) if isinstance(name, str) else None
+    except KeyError:
+        return None
+    return fn if fn is not None and (kind is None or fn.kind == kind) else None
+
+
+def import_functions(functions: Iterable[str]) -> None:
+    """Import the modules registering ``functions`` now; names no plugin registers are left for :func:`get` to
+    report."""
+    for name in functions:
+        try:
+            get(name)
+        except KeyError:
+            pass
+
+
+def imported_plugins() -> list[str]:
+    """The names of the plugins declaring ``modules`` whose modules this process has imported (the ones its
+    pipelines named): what a worker process it starts should import too."""
+    load_library()
+    waiting = {p.name for p in _UNIMPORTED.values()}
+    return [p.name for p in _PLUGINS.values() if p.modules and p.name not in waiting]
+
+
+def import_plugins(plugin_names: Iterable[str]) -> None:
+    """Import the ``modules`` of the loaded plugins named (see :func:`imported_plugins`)."""
+    load_library()
+    for name in plugin_names:
+        plugin = _PLUGINS.get(name)
+        if plugin is not None and plugin.modules and any(_UNIMPORTED.get(n) is plugin for n in plugin.namespaces):
+            _import_modules(plugin)
 
 
 def names(kind: str | None = None) -> list[str]:
     """All registered names, optionally of one kind."""
-    load_library()
+    _import_all()
     return sorted(n for n, f in _REGISTRY.items() if kind is None or f.kind == kind)
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import enum
 import os
 import shutil
+import sys
 import time
 import traceback
 from dataclasses import dataclass, replace
@@ -152,7 +153,10 @@ def left_out_items(call: TaskCall, upstream: tuple) -> tuple[tuple[str, str, str
 
 def _in_dask_worker() -> bool:
     """True inside a dask worker (whose process the engine sets up; in the caller's own process the CLI, or the
-    program calling the API, decides how logging looks)."""
+    program calling the API, decides how logging looks). A process that never imported ``distributed`` is no
+    worker, and is spared its import (about a second)."""
+    if "distributed" not in sys.modules:
+        return False
     try:
         from distributed import get_worker
         get_worker()

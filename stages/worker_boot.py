@@ -4,13 +4,17 @@
   shuts the cluster down cleanly (no traceback from every worker). Set here as well as inherited at spawn
   (``execute._ctrl_c_ignored_by_children``), because the cluster may be started from a thread, where the
   client cannot change signal handlers.
-- The stage functions' modules (``registry.load_library``) are imported now, while the client is still planning
-  and writing generated datasets, instead of by the worker's first task (0.7 s here). A plugin that fails to
-  import is reported by the task that needs it, as before.
+- The stage functions' modules are imported now, while the client is still planning and writing generated
+  datasets, instead of by the worker's first task (0.7 s here): the plugins (``registry.load_library``), and
+  the modules of those the client has imported for its pipeline (``WORKER_IMPORTS_ENV``, set by
+  ``execute.make_client``), not the others. A plugin that fails to import is reported by the task that needs it.
 """
 from __future__ import annotations
 
+import os
 import signal
+
+WORKER_IMPORTS_ENV = "STAGES_WORKER_IMPORTS"   # comma-separated plugin names (registry.imported_plugins)
 
 
 def dask_setup(worker) -> None:
@@ -19,5 +23,6 @@ def dask_setup(worker) -> None:
     try:
         from . import registry
         registry.load_library()
+        registry.import_plugins(filter(None, os.environ.get(WORKER_IMPORTS_ENV, "").split(",")))
     except Exception:  # noqa: BLE001 -- the task that needs the plugin reports the error, with its traceback
         pass

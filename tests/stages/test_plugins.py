@@ -74,3 +74,82 @@ def test_the_engine_names_neither_the_algorithms_nor_the_application():
     for path in ENGINE.rglob("*.py"):
         for name in _imported_modules(path):
             assert not name.split(".")[0] in ("corr_core", "shapecorr"), f"{path.relative_to(ROOT)}: {name}"
+
+
+LAZY_PLUGIN = """\
+from stages.registry import Plugin
+PLUGIN = Plugin(name="{name}", packages=("{name}",), modules=("{name}.funcs",), namespaces=("{space}",))
+"""
+LAZY_FUNCS = """\
+from stages.registry import register
+
+@register("{space}.f")
+def f():
+    return 1
+
+@register("{stray}.g")
+def g():
+    return 2
+"""
+
+
+def _lazy_plugin(tmp_path, monkeypatch, name: str, space: str, stray: str) -> registry.Plugin:
+    package = tmp_path / name
+    package.mkdir()
+    (package / "__init__.py").write_text(LAZY_PLUGIN.format(name=name, space=space))
+    (package / "funcs.py").write_text(LAZY_FUNCS.format(space=space, stray=stray))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    return registry.load_plugin(name)
+
+
+def test_a_plugin_declaring_its_modules_is_imported_when_one_of_its_names_is_looked_up(tmp_path, monkeypatch):
+    import sys
+
+    _lazy_plugin(tmp_path, monkeypatch, "lazy_plugin_mod", "lazyns", "lazyns")
+    assert "lazy_plugin_mod.funcs" not in sys.modules                  # declared, not imported
+    assert registry.find("lazyns.nope") is None and "lazy_plugin_mod.funcs" in sys.modules
+    assert registry.get("lazyns.g").module == "lazy_plugin_mod.funcs"
+    assert "lazy_plugin_mod" in registry.imported_plugins()
+
+
+def test_a_lazy_plugin_registering_outside_its_namespaces_or_half_declared_is_an_error(tmp_path, monkeypatch):
+    _lazy_plugin(tmp_path, monkeypatch, "stray_plugin_mod", "strayns", "elsewhere")
+    with pytest.raises(PipelineError, match="registers 'elsewhere.g' outside its namespaces strayns"):
+        registry.get("strayns.f")
+    with pytest.raises(PipelineError, match="declares modules without namespaces"):
+        registry.add_plugin(registry.Plugin("half", modules=("x",)))
+
+
+def test_a_pipeline_of_other_plugins_imports_none_of_the_application_and_nor_do_its_workers(tmp_path):
+    """The engine running the synthetic test pipeline in its own process (``--workers 0``: nor dask.distributed),
+    and the local workers it starts, do not import the application's modules (a second each); once the process has
+    looked up an application function, the workers it starts import them at boot, before their first task."""
+    import subprocess
+    import sys
+
+    from tests.helpers import make_project, plugins_env
+
+    path = make_project(tmp_path, n=2)
+    script = f"""
+import sys
+from stages import api, registry
+from stages.execute import make_client
+probe = lambda: sorted(m for m in ("shapecorr.alignment", "shapecorr.dense") if m in sys.modules)
+api.run({str(path)!r}, workers=0, cache_dir={str(tmp_path / 'cache')!r}, output_dir={str(tmp_path / 'out')!r},
+        quiet=True)
+print(probe(), "distributed" in sys.modules)
+for step in ("other", "application"):
+    if step == "application":
+        registry.get("align.solve")
+    client = make_client(1, local_dir={str(tmp_path / 'dask')!r})
+    print(step, registry.imported_plugins(), list(client.run(probe).values()))
+    cluster = client.cluster
+    client.close()
+    cluster.close()
+"""
+    env = {**__import__("os").environ, **plugins_env()}
+    res = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.splitlines() == ["[] False", "other [] [[]]",
+                                       "application ['shapecorr'] [['shapecorr.alignment', 'shapecorr.dense']]"]
