@@ -36,6 +36,7 @@ import importlib
 import importlib.metadata
 import inspect
 import os
+import threading
 import types
 import typing
 from dataclasses import dataclass, field
@@ -163,6 +164,7 @@ class StageFunction:
 _REGISTRY: dict[str, StageFunction] = {}
 _PLUGINS: dict[str, Plugin] = {}
 _UNIMPORTED: dict[str, Plugin] = {}   # namespace -> the plugin whose ``modules`` register it, not imported yet
+_IMPORT_LOCK = threading.RLock()
 _LOADED = False
 
 
@@ -253,16 +255,21 @@ def add_plugin(plugin: Plugin) -> Plugin:
 
 
 def _import_modules(plugin: Plugin) -> None:
-    """Import the ``modules`` of a plugin that declares them (registering its functions), once."""
-    for namespace in plugin.namespaces:
-        _UNIMPORTED.pop(namespace, None)
-    before = set(_REGISTRY)
-    for module_name in plugin.modules:
-        try:
-            importlib.import_module(module_name)
-        except ImportError as exc:
-            raise PipelineError(f"cannot import module {module_name} of plugin '{plugin.name}': {exc}",
-                                fix="install what it imports, or fix the plugin's `modules`") from exc
+    """Import the ``modules`` of a plugin that declares them (registering its functions), once; a module that
+    cannot be imported is the same error at every look-up of the plugin's names, not an unknown name after the
+    first."""
+    with _IMPORT_LOCK:   # a cluster may be starting in a thread (execute.make_client reads imported_plugins)
+        if not any(_UNIMPORTED.get(n) is plugin for n in plugin.namespaces):
+            return
+        before = set(_REGISTRY)
+        for module_name in plugin.modules:
+            try:
+                importlib.import_module(module_name)
+            except ImportError as exc:
+                raise PipelineError(f"cannot import module {module_name} of plugin '{plugin.name}': {exc}",
+                                    fix="install what it imports, or fix the plugin's `modules`") from exc
+        for namespace in plugin.namespaces:
+            _UNIMPORTED.pop(namespace, None)
     stray = sorted(n for n in set(_REGISTRY) - before if n.split(".")[0] not in plugin.namespaces)
     if stray:
         raise PipelineError(f"plugin '{plugin.name}' registers {stray[0]!r} outside its namespaces "
@@ -272,7 +279,9 @@ def _import_modules(plugin: Plugin) -> None:
 def _import_all() -> None:
     """Import every plugin's ``modules`` (all names are wanted: a listing, a suggestion)."""
     load_library()
-    for plugin in list({p.name: p for p in _UNIMPORTED.values()}.values()):
+    with _IMPORT_LOCK:
+        waiting = list({p.name: p for p in _UNIMPORTED.values()}.values())
+    for plugin in waiting:
         _import_modules(plugin)
 
 
@@ -333,8 +342,9 @@ def get(name: str) -> StageFunction:
     """The registered function ``name`` (KeyError if unknown); its plugin's ``modules`` are imported first
     when they are not yet."""
     load_library()
-    if name not in _REGISTRY and name.split(".")[0] in _UNIMPORTED:
-        _import_modules(_UNIMPORTED[name.split(".")[0]])
+    plugin = None if name in _REGISTRY else _UNIMPORTED.get(name.split(".")[0])
+    if plugin is not None:
+        _import_modules(plugin)
     return _REGISTRY[name]
 
 
@@ -362,7 +372,8 @@ def imported_plugins() -> list[str]:
     """The names of the plugins declaring ``modules`` whose modules this process has imported (the ones its
     pipelines named): what a worker process it starts should import too."""
     load_library()
-    waiting = {p.name for p in _UNIMPORTED.values()}
+    with _IMPORT_LOCK:
+        waiting = {p.name for p in _UNIMPORTED.values()}
     return [p.name for p in _PLUGINS.values() if p.modules and p.name not in waiting]
 
 
@@ -371,7 +382,7 @@ def import_plugins(plugin_names: Iterable[str]) -> None:
     load_library()
     for name in plugin_names:
         plugin = _PLUGINS.get(name)
-        if plugin is not None and plugin.modules and any(_UNIMPORTED.get(n) is plugin for n in plugin.namespaces):
+        if plugin is not None and plugin.modules:
             _import_modules(plugin)
 
 

@@ -94,6 +94,10 @@ def g():
 
 
 def _lazy_plugin(tmp_path, monkeypatch, name: str, space: str, stray: str) -> registry.Plugin:
+    """Declare the plugin ``name`` (modules ``name.funcs``, registering ``SPACE.f`` and ``STRAY.g``) in a copy of
+    the registry that is dropped after the test, so a later listing of every name does not import it."""
+    for table in ("_REGISTRY", "_PLUGINS", "_UNIMPORTED"):
+        monkeypatch.setattr(registry, table, dict(getattr(registry, table)))
     package = tmp_path / name
     package.mkdir()
     (package / "__init__.py").write_text(LAZY_PLUGIN.format(name=name, space=space))
@@ -153,3 +157,12 @@ for step in ("other", "application"):
     assert res.returncode == 0, res.stderr
     assert res.stdout.splitlines() == ["[] False", "other [] [[]]",
                                        "application ['shapecorr'] [['shapecorr.alignment', 'shapecorr.dense']]"]
+
+
+def test_a_lazy_module_that_cannot_be_imported_is_the_same_error_at_every_look_up(tmp_path, monkeypatch):
+    _lazy_plugin(tmp_path, monkeypatch, "broken_plugin_mod", "brokenns", "brokenns")
+    (tmp_path / "broken_plugin_mod" / "funcs.py").write_text("import no_such_dependency_xyz\n")
+    for _ in range(2):      # not "unknown function" the second time
+        with pytest.raises(PipelineError, match="cannot import module broken_plugin_mod.funcs of plugin "
+                                                "'broken_plugin_mod': No module named 'no_such_dependency_xyz'"):
+            registry.get("brokenns.f")
