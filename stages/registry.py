@@ -308,9 +308,7 @@ def plugins(functions: Iterable[str] | None = None) -> list[Plugin]:
     load_library()
     if functions is None:
         return list(_PLUGINS.values())
-    functions = list(functions)
-    import_functions(functions)
-    modules = {_REGISTRY[f].module for f in functions if f in _REGISTRY}
+    modules = {fn.module for fn in map(find, functions) if fn is not None}
     return [p for p in _PLUGINS.values() if any(p.owns(m) for m in modules)]
 
 
@@ -356,16 +354,6 @@ def find(name: Any, kind: str | None = None) -> StageFunction | None:
     except KeyError:
         return None
     return fn if fn is not None and (kind is None or fn.kind == kind) else None
-
-
-def import_functions(functions: Iterable[str]) -> None:
-    """Import the modules registering ``functions`` now; names no plugin registers are left for :func:`get` to
-    report."""
-    for name in functions:
-        try:
-            get(name)
-        except KeyError:
-            pass
 
 
 def imported_plugins() -> list[str]:
