@@ -185,6 +185,11 @@ def main(argv=None) -> int:
         print("interrupted: everything finished so far is kept in the cache; run again to resume", file=sys.stderr)
         return 130
     except OSError as exc:  # a folder that cannot be written, a disk that is full, ...
+        if isinstance(exc, TimeoutError) and not exc.filename:   # dask or a storage server did not answer
+            print(f"error: no answer in time ({exc or 'timed out'})\n  fix: check that the machine is not "
+                  "overloaded and any --scheduler or storage server is up, then run again: every finished result "
+                  "is kept in the cache", file=sys.stderr)
+            return 1
         where = f" {exc.filename}" if exc.filename else ""
         print(f"error: cannot access{where}: {exc.strerror or exc}\n  fix: check the path, its permissions and "
               "free space (every finished result is kept in the cache)", file=sys.stderr)

@@ -2,8 +2,10 @@
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import threading
+import time
 from contextlib import contextmanager
 from typing import Any, Callable, Iterator
 
@@ -72,10 +74,47 @@ def client_session(workers: int, scheduler: str | None, cache_dir: str,
             starter.join()
         client = holder.get("client")
         if client is not None:
-            cluster = getattr(client, "cluster", None)
-            client.close()
-            if cluster is not None and not scheduler:
-                cluster.close()
+            close_client(client, own_cluster=not scheduler, log=log)
+
+
+CLOSE_TIMEOUT_S = 15.0   # for the client and its local cluster together; a clean close takes 1-3 s
+
+
+def close_client(client, own_cluster: bool, timeout_s: float = CLOSE_TIMEOUT_S,
+                 log: Callable[..., None] | None = None) -> None:
+    """Close ``client`` and, when ``own_cluster``, its local cluster, within ``timeout_s`` seconds in all.
+
+    A close that fails or does not finish in time (dask's event loop stuck after a Ctrl-C, a worker that does not
+    answer) neither hangs the command nor replaces its outcome (its exit code, a Ctrl-C): every result is stored
+    already. The local cluster's worker processes are then killed and ``log`` gets one warning line.
+    """
+    cluster = getattr(client, "cluster", None) if own_cluster else None
+    deadline = time.monotonic() + timeout_s
+    try:
+        client.close(timeout=timeout_s)
+        if cluster is not None:
+            cluster.close(timeout=max(deadline - time.monotonic(), 1.0))
+    except Exception as exc:  # noqa: BLE001 -- dask's TimeoutError, a connection error, ...
+        killed = _kill_worker_processes(cluster) if cluster is not None else 0
+        if log is not None:
+            log(f"warning: dask did not shut down cleanly within {timeout_s:g} s ({type(exc).__name__}: "
+                f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); "
+                f"{killed} local worker process(es) killed. Every finished result is stored.")
+
+
+def _kill_worker_processes(cluster) -> int:
+    """SIGKILL the worker processes of a dask LocalCluster (its nannies' children): the number killed."""
+    killed = 0
+    for nanny in list(getattr(cluster, "workers", {}).values()):
+        pid = getattr(getattr(getattr(nanny, "process", None), "process", None), "pid", None)
+        if not isinstance(pid, int) or pid == os.getpid():
+            continue
+        try:
+            os.kill(pid, signal.SIGKILL)
+            killed += 1
+        except (ProcessLookupError, PermissionError):
+            pass
+    return killed
 
 
 @contextmanager

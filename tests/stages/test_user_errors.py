@@ -248,6 +248,23 @@ def test_quiet_still_prints_each_failure(project, tmp_path):
     assert "FAILED feat[s003]" in r.stderr and "marker" in r.stderr, r.stderr
 
 
+@pytest.mark.parametrize("exc, says", [
+    (TimeoutError("timed out after 60 s."), "error: no answer in time (timed out after 60 s.)"),
+    (PermissionError(13, "Permission denied", "/x/cache"), "error: cannot access /x/cache: Permission denied")])
+def test_a_timeout_is_not_reported_as_a_file_that_cannot_be_accessed(exc, says, monkeypatch, capsys):
+    """TimeoutError is an OSError: without a file name it is dask or a server that did not answer, not a path."""
+    from stages import cli as stages_cli
+
+    def run(*args, **kwargs):
+        raise exc
+
+    monkeypatch.setattr(api, "run", run)
+    assert stages_cli.main(["run", "p.yaml"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(says) and "Traceback" not in err, err
+    assert ("cannot access" in err) == isinstance(exc, PermissionError), err
+
+
 def _sigint_default():
     """In the child: Ctrl-C handled as in a terminal. A test run started in the background by a non-interactive
     shell (``cmd &``, nohup) inherits SIGINT ignored, and Python then never raises KeyboardInterrupt."""
