@@ -153,9 +153,10 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
     the kept map kept before the refinement held them -- the starting map made from them, or the alternative as
     given: points that no near-isometric map keeps all of, e.g. left and right swapped, score low; absent with a
     single automatic hypothesis)} or ``skips.skipped(why)``. With given points and an
-    ``alternative`` (another ``corr.dense_refine`` result of the same pair, e.g. dense_auto's), that map is kept
-    instead when it keeps the given points and is less distorted (``refine.best_with_points``; "hypothesis":
-    "alternative"): points never make a map worse."""
+    ``alternative`` (another ``corr.dense_refine`` result of the same pair, e.g. dense_auto's) that keeps the given
+    points, both maps get the registration once more with the points held and the less distorted is kept
+    (``refine.with_alternative``; "hypothesis": "alternative" when it is that one): points do not make a map
+    worse."""
     if is_skipped(initial):
         return skipped(skip_reason(initial))
     S, T = _basis(template_basis, "template"), _basis(target_basis, "target")

@@ -68,9 +68,10 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
             least distorted refined map is kept (``refine.refine_best``), which resolves the 180-degree turn of
             a body whose front and back look alike.
         alternative: sparse mode only: (n_s,) int another map of the same pair in original ids (e.g. this
-            function's automatic map), kept instead of the map made from the landmarks when it keeps them (80 %
-            within 0.1 sqrt(area), ``refine.best_with_points``) and is less distorted: given points then never
-            make the map worse than the automatic one.
+            function's automatic map). When it keeps the landmarks (80 % within 0.1 sqrt(area)), it and the map
+            made from them both get the registration once more with the landmarks held, and the less distorted
+            of the two is kept (``refine.with_alternative``): given points then do not make the map worse than
+            the automatic one.
     Returns:
         (n_s,) int64 target vertex id (original ids) of every template vertex; -1 for template vertices off the
         template's largest connected component (loose pieces, unused vertices: see ``basis``).

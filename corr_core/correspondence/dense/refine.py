@@ -534,24 +534,34 @@ def best_with_points(source: MeshBasis, target: MeshBasis, maps: list, points: t
 
 def with_alternative(source: MeshBasis, target: MeshBasis, best: BestMap, alternative: np.ndarray,
                      points: tuple[np.ndarray, np.ndarray], refine: str | Sequence | None = None) -> BestMap:
-    """``best`` (the refined map made from given points) or ``alternative``, whichever ``best_with_points`` keeps.
+    """``best`` (the refined map made from given points) or ``alternative``, the less distorted once both are held.
 
     Args: best: ``refine_best``'s result for the map made from the points; alternative: (n_s original,) int another
         dense map of the same pair in original ids (-1 off the kept component), e.g. the automatic one;
         points: (template ids (L,) int, target ids (L,) int), local, the given points; refine: the plan that refined
-        ``best`` with the points held (``refine_best(points=)``), or None: an alternative that is kept is then
-        held to the points the same way (``hold_points``), so the kept map sends them where they are given. The
-        two are compared as they come: holding a map runs the registration once more, which lowers any map's
-        distortion a little, so holding only the alternative before the comparison would favour it (on the
-        course poses it then replaced maps from the points that were more accurate).
-    Returns: ``BestMap`` of the two (index 1: the alternative was kept).
+        ``best`` with the points held (``refine_best(points=)``), or None: the two compared as they come
+        (``best_with_points``).
+    With a plan, an alternative that keeps the given points (``points_agreement`` >= ``MIN_POINTS_KEPT``, read on
+    the alternative as given) and ``best`` both get the plan's registration once more with the points held
+    (``hold_points``), and the less distorted of the two held maps is kept (a tie keeps ``best``). Holding a map
+    runs the registration once more, which lowers its distortion and its error: holding only the alternative
+    favoured it (on the course poses it then replaced maps from the points that were more accurate), and comparing
+    the two as they came kept, on 2 of the default pipeline's 6 poses, the map from the points that was less
+    distorted by a hair but less accurate than the automatic one (docs/dense.md "Given points never hurt"). An
+    alternative that does not keep the points is not refined, and ``best`` is returned as it is.
+    Returns: ``BestMap`` of the two (index 1: the alternative was kept; distortions: of the held maps, inf for an
+        alternative that does not keep the points).
     """
     other = map_to_local(source, target, alternative)
-    kept = best_with_points(source, target, [best.p2p, other], points,
-                            known_distortions=(best.distortions[best.index],))
-    if kept.index == 1 and refine is not None:
-        kept = replace(kept, p2p=hold_points(source, target, kept.p2p, refine, points))
-    return kept
+    if refine is None:
+        return best_with_points(source, target, [best.p2p, other], points,
+                                known_distortions=(best.distortions[best.index],))
+    if points_agreement(target, other, points) < MIN_POINTS_KEPT:
+        return BestMap(np.asarray(best.p2p), 0, (best.distortions[best.index], float("inf")))
+    held = [hold_points(source, target, m, refine, points) for m in (best.p2p, other)]
+    scores = tuple(map_distortion(source, target, m) for m in held)
+    kept = int(np.argmin(scores))
+    return BestMap(held[kept], kept, scores)
 
 
 def hold_points(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, refine: str | Sequence | None,

@@ -417,6 +417,37 @@ def test_a_kept_alternative_is_held_to_the_points(pair, monkeypatch):
     assert not runs                                                        # turned keeps no point: not refined
 
 
+def test_both_maps_are_held_once_more_and_the_less_distorted_held_map_is_kept(pair, monkeypatch):
+    """With a plan, the map from the points and an alternative that keeps them are both held once more
+    (``hold_points``) and compared held: comparing the map from the points as it came with a held alternative,
+    or the two as they came, kept on the default pipeline's poses 2 and 6 a map from the points less distorted
+    by a hair but less accurate than the automatic one. A tie keeps the map from the points."""
+    from corr_core.correspondence.dense import refine
+    from corr_core.correspondence.dense.basis import map_to_original
+
+    S, T = pair
+    truth = np.arange(S.n)
+    points = (S.samples[:4], truth[S.samples[:4]].copy())
+    from_points = truth.copy()
+    from_points[S.samples[10]] = T.samples[11]                       # another map that keeps the points too
+    held_ones: list[np.ndarray] = []
+
+    def hold(source, target, p2p, plan, pts):
+        held_ones.append(np.asarray(p2p))
+        return np.asarray(p2p) + 0                                   # a new array: "held"
+
+    for held_scores, kept_index in (((0.2, 0.1), 1), ((0.1, 0.2), 0), ((0.1, 0.1), 0)):
+        held_ones.clear()
+        scores = iter(held_scores)
+        monkeypatch.setattr(refine, "hold_points", hold)
+        monkeypatch.setattr(refine, "map_distortion", lambda s, t, m: next(scores))
+        kept = refine.with_alternative(S, T, refine.BestMap(from_points, 0, (0.0,)), map_to_original(S, T, truth),
+                                       points, refine="deform")
+        assert [np.array_equal(m, w) for m, w in zip(held_ones, (from_points, truth))] == [True, True]
+        assert kept.index == kept_index and kept.distortions == held_scores, (held_scores, kept)
+        assert np.array_equal(kept.p2p, (from_points, truth)[kept_index])
+
+
 def test_map_to_local_inverts_map_to_original(pair):
     from corr_core.correspondence.dense.basis import map_to_local, map_to_original
 
