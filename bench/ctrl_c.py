@@ -1,8 +1,8 @@
 """Ctrl-C to a running ``python -m stages run`` process group, many times: exit codes and seconds to exit.
 
-Each try starts the tests' synthetic pipeline (``tests.helpers.make_project``, 12 items, ``--set work=2000``,
-``--workers 2``) in a new process group, waits for its first ``done`` progress line (the workers are up and busy),
-waits a random 0-0.3 s more, sends SIGINT to the group (as a terminal's Ctrl-C does) and times the exit. A clean
+Each try runs the e2e test's interruption (``tests.helpers.interrupted_run``: the tests' synthetic pipeline, 12
+items, ``--set work=2000``, ``--workers 2``, in a new process group; SIGINT to the group, as a terminal's Ctrl-C,
+after its first ``done`` progress line), a random 0-0.3 s after that line, and times the exit. A clean
 interruption exits 130 with no traceback; ``stages.session.CLOSE_TIMEOUT_S`` bounds how long closing dask may take.
 ``--burn N`` runs N busy-looping processes beside it (a loaded CI machine).
 
@@ -17,65 +17,19 @@ from __future__ import annotations
 
 import argparse
 import multiprocessing
-import os
 import random
-import signal
-import subprocess
 import sys
 import tempfile
-import threading
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from tests.helpers import interrupted_run, make_project  # noqa: E402
 
 
 def _burn(_: int) -> None:
     while True:
         pass
-
-
-def _sigint_default() -> None:
-    """In the child: Ctrl-C handled as in a terminal (a background shell may have left SIGINT ignored)."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
-def interrupt_once(folder: Path, rng: random.Random) -> tuple[int, float, str]:
-    """(exit code, seconds from SIGINT to exit, stderr) of one interrupted run in ``folder``."""
-    from tests.helpers import SYNTHETIC_PLUGIN, make_project
-
-    project = make_project(folder)
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
-           "STAGES_PLUGINS": SYNTHETIC_PLUGIN}
-    proc = subprocess.Popen([sys.executable, "-m", "stages", "run", str(project), "--set", "work=2000",
-                             "--workers", "2"], cwd=folder, env=env, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=_sigint_default)
-    lines: list[str] = []
-    started = threading.Event()
-
-    def read() -> None:
-        for line in proc.stderr:
-            lines.append(line)
-            if "done" in line:
-                started.set()
-
-    reader = threading.Thread(target=read, daemon=True)
-    reader.start()
-    if not started.wait(240):
-        proc.kill()
-        return -1, float("nan"), "".join(lines) + "\n(no progress line within 240 s)"
-    time.sleep(rng.random() * 0.3)
-    t0 = time.perf_counter()
-    os.killpg(proc.pid, signal.SIGINT)
-    try:
-        proc.wait(timeout=200)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
-    seconds = time.perf_counter() - t0
-    reader.join(timeout=30)
-    return proc.returncode, seconds, "".join(lines)
 
 
 def main() -> None:
@@ -95,7 +49,8 @@ def main() -> None:
             for i in range(args.tries):
                 folder = Path(tmp) / f"try{i}"
                 folder.mkdir()
-                code, took, err = interrupt_once(folder, rng)
+                code, took, err = interrupted_run(make_project(folder), folder, delay_s=rng.random() * 0.3,
+                                                  exit_timeout_s=200)
                 clean = code == 130 and "Traceback" not in err
                 codes[code] = codes.get(code, 0) + 1
                 seconds.append(took)

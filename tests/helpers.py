@@ -4,8 +4,11 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import signal
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -149,6 +152,52 @@ def cli_main(args: list[str], cwd: Path, env: dict | None = None, timeout: float
                 os.environ[k] = v
     return subprocess.CompletedProcess([sys.executable, "-m", "stages", *map(str, args)], code, out.getvalue(),
                                        err.getvalue())
+
+
+def _sigint_default() -> None:
+    """In the child: Ctrl-C handled as in a terminal. A test run started in the background by a non-interactive
+    shell (``cmd &``, nohup) inherits SIGINT ignored, and Python then never raises KeyboardInterrupt."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def interrupted_run(project: Path, cwd: Path, delay_s: float = 0.0, exit_timeout_s: float = 120,
+                    start_timeout_s: float = 240) -> tuple[int, float, str]:
+    """``python -m stages run PROJECT --set work=2000 --workers 2`` (the synthetic pipeline) in a new process group,
+    SIGINT to the group (a terminal's Ctrl-C) ``delay_s`` after its first ``done`` progress line (the workers up and
+    busy). Returns (exit code, seconds from the SIGINT to the exit, stderr). A run that prints no progress line
+    within ``start_timeout_s`` or does not exit within ``exit_timeout_s`` is killed (exit code -1 or -9, the
+    reason at the end of stderr)."""
+    proc = subprocess.Popen([sys.executable, "-m", "stages", "run", str(project), "--set", "work=2000",
+                             "--workers", "2"], cwd=cwd, env={**os.environ, **plugins_env()},
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=_sigint_default)
+    lines: list[str] = []
+    started = threading.Event()
+
+    def read() -> None:
+        for line in proc.stderr:
+            lines.append(line)
+            if "done" in line:
+                started.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    if not started.wait(start_timeout_s):
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        return -1, float("nan"), "".join(lines) + f"\n(no progress line within {start_timeout_s:g} s)"
+    time.sleep(delay_s)
+    t0 = time.perf_counter()
+    os.killpg(proc.pid, signal.SIGINT)
+    try:
+        proc.wait(timeout=exit_timeout_s)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        lines.append(f"\n(no exit within {exit_timeout_s:g} s of the SIGINT: killed)")
+    seconds = time.perf_counter() - t0
+    reader.join(timeout=30)
+    return proc.returncode, seconds, "".join(lines)
 
 
 def executed(summary: dict) -> dict[str, int]:

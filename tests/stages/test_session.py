@@ -75,6 +75,7 @@ def test_a_close_that_times_out_kills_the_local_workers_and_keeps_the_ctrl_c(tmp
     normally is not failed by it either."""
     import subprocess
     import sys
+    from contextlib import nullcontext
 
     import pytest
 
@@ -86,7 +87,7 @@ def test_a_close_that_times_out_kills_the_local_workers_and_keeps_the_ctrl_c(tmp
         monkeypatch.setattr(session, "make_client", lambda *a, **k: stuck)
         lines: list[str] = []
         try:
-            with pytest.raises(KeyboardInterrupt) if interrupted else _nothing():
+            with pytest.raises(KeyboardInterrupt) if interrupted else nullcontext():
                 with client_session(2, None, str(tmp_path), lambda *a, **k: lines.append(" ".join(a))) as get:
                     assert get() is stuck
                     if interrupted:
@@ -97,9 +98,3 @@ def test_a_close_that_times_out_kills_the_local_workers_and_keeps_the_ctrl_c(tmp
         assert stuck.closes and all(t <= session.CLOSE_TIMEOUT_S for t in stuck.closes)
         assert len(lines) == 1 and lines[0].startswith("warning: dask did not shut down cleanly"), lines
         assert "1 local worker process(es) killed" in lines[0], lines
-
-
-def _nothing():
-    from contextlib import nullcontext
-
-    return nullcontext()

@@ -5,10 +5,7 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import subprocess
-import sys
-import threading
 from pathlib import Path
 
 import pytest
@@ -18,7 +15,7 @@ from stages.config import load_pipeline
 from stages.errors import PipelineError, UserError
 from stages.store import Store
 
-from tests.helpers import ROOT, SYNTHETIC_YAML, cli, cli_main, free_port, make_project
+from tests.helpers import ROOT, SYNTHETIC_YAML, cli, cli_main, free_port, interrupted_run, make_project
 
 BILLION_LAUGHS = "\n".join(
     ['a0: &a0 ["lol","lol","lol","lol","lol","lol","lol","lol","lol"]']
@@ -265,36 +262,10 @@ def test_a_timeout_is_not_reported_as_a_file_that_cannot_be_accessed(exc, says, 
     assert ("cannot access" in err) == isinstance(exc, PermissionError), err
 
 
-def _sigint_default():
-    """In the child: Ctrl-C handled as in a terminal. A test run started in the background by a non-interactive
-    shell (``cmd &``, nohup) inherits SIGINT ignored, and Python then never raises KeyboardInterrupt."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 @pytest.mark.e2e   # a whole multi-process run: .ci/run (pytest -m e2e), not the README's test command
 def test_ctrl_c_to_the_process_group_shuts_down_without_worker_tracebacks(project, tmp_path):
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.Popen([sys.executable, "-m", "stages", "run", str(project), "--set", "work=2000",
-                             "--workers", "2"], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True,
-                            preexec_fn=_sigint_default)
-    lines: list[str] = []
-    started = threading.Event()
-
-    def read():
-        for line in proc.stderr:
-            lines.append(line)
-            if "done" in line:  # workers are up and busy
-                started.set()
-
-    reader = threading.Thread(target=read, daemon=True)
-    reader.start()
-    assert started.wait(timeout=240), "".join(lines)
-    os.killpg(proc.pid, signal.SIGINT)
-    proc.wait(timeout=120)
-    reader.join(timeout=30)
-    err = "".join(lines)
-    assert proc.returncode == 130, err
+    code, _, err = interrupted_run(project, tmp_path)
+    assert code == 130, err
     assert "interrupted" in err and "Traceback" not in err, err
 
 
