@@ -85,7 +85,8 @@ CLOSE_TIMEOUT_S = 15.0
 
 def close_client(client, own_cluster: bool, timeout_s: float = CLOSE_TIMEOUT_S,
                  log: Callable[..., None] | None = None) -> None:
-    """Close ``client`` and, when ``own_cluster``, its local cluster, within ``timeout_s`` seconds in all.
+    """Close ``client`` and, when ``own_cluster``, its local cluster, within ``timeout_s`` seconds in all (the
+    cluster gets at least 1 s of its own when the client took nearly all of it).
 
     A close that fails or does not finish in time (dask's event loop stuck after a Ctrl-C, a worker that does not
     answer) neither hangs the command nor replaces its outcome (its exit code, a Ctrl-C): every result is stored
