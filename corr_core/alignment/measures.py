@@ -134,9 +134,12 @@ def continuous_error(angles_deg: np.ndarray, truth_deg: np.ndarray, orders: np.n
     if not keep.any():
         return {"mean_error_deg": 0.0, "max_error_deg": 0.0, "offset_deg": 0.0, "n": 0}
     offsets = np.arange(0.0, 360.0, resolution_deg)
-    # mean error per offset, a block of offsets at a time: (n_offsets, n) would be 2.9 GB at n = 10,000
-    step = max(1, (64 << 20) // (8 * max(1, diff.size)))
-    means = np.concatenate([np.stack([_periodic_distance(diff - o, period) for o in offsets[s:s + step]]).mean(axis=1)
+    # mean error per offset, a block of offsets at a time ((n_offsets, n) would be 2.9 GB at n = 10,000) of about
+    # 65k differences (512 kB), whose elementwise steps stay in cache: `python bench/continuous_error.py` printed,
+    # against one offset at a time (the code before), x0.06 of its time at 98 shapes, x0.31 at 1,000, x0.63 at
+    # 10,000 (64 MB blocks: x1.46, x0.57, x1.37), the same means bit for bit.
+    step = max(1, (1 << 16) // max(1, diff.size))
+    means = np.concatenate([_periodic_distance(diff[None, :] - offsets[s:s + step, None], period[None, :]).mean(axis=1)
                             for s in range(0, len(offsets), step)])
     best = int(np.argmin(means))
     err = _periodic_distance(diff - offsets[best], period)

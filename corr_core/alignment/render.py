@@ -26,6 +26,7 @@ double-sided, as the meshes are not watertight and their normals are not consist
 from __future__ import annotations
 
 import functools
+from typing import Sequence
 
 import numpy as np
 
@@ -53,19 +54,24 @@ def camera_frames(*, n_views: int = 16, elevation_deg: float = 20.0) -> np.ndarr
 
 
 def view_rays(
-    *, n_views: int = 16, image_size: int = 120, elevation_deg: float = 20.0, margin: float = 1.05
+    *, n_views: int = 16, image_size: int = 120, elevation_deg: float = 20.0, margin: float = 1.05,
+    views: Sequence[int] | None = None,
 ) -> np.ndarray:
-    """Orthographic rays of every pixel of every view.
+    """Orthographic rays of every pixel of every view (or of the cameras ``views`` only).
 
     Args:
         n_views, elevation_deg: see ``camera_frames``.
         image_size: pixels per side (square images).
         margin: half-width of the square view window in world units (1.05 keeps a unit sphere in view).
+        views: indices of the cameras (of ``n_views``) whose rays are made, in this order; None: all. A camera's
+            rays are the same bit for bit either way.
     Returns:
-        (n_views, image_size, image_size, 6) float32 rays [origin, unit direction]; row 0 is the top
-        of the image; origins lie 3 units from the origin, outside the unit sphere.
+        (n_views or len(views), image_size, image_size, 6) float32 rays [origin, unit direction]; row 0 is the
+        top of the image; origins lie 3 units from the origin, outside the unit sphere.
     """
     frames = camera_frames(n_views=n_views, elevation_deg=elevation_deg)
+    if views is not None:
+        frames = frames[np.asarray(views, dtype=np.int64)]
     centres = (np.arange(image_size) + 0.5) / image_size * 2.0 - 1.0
     u = centres * margin  # image x (columns, left -> right)
     v = -centres * margin  # image y (rows, top -> bottom), so world-up is image-up

@@ -63,8 +63,8 @@ def _scene(V: np.ndarray, F: np.ndarray):
 def _rays(view: int, n_views: int, size: int, elevation_deg: float):
     """The Open3D tensor of camera ``view``'s rays (size, size, 6): the same for every mesh (all are normalised
     to the same box), so made once per camera."""
-    rays = view_rays(n_views=n_views, image_size=size, elevation_deg=elevation_deg, margin=MARGIN)
-    return load_open3d().core.Tensor(np.ascontiguousarray(rays[view]))
+    rays = view_rays(n_views=n_views, image_size=size, elevation_deg=elevation_deg, margin=MARGIN, views=(view,))
+    return load_open3d().core.Tensor(np.ascontiguousarray(rays[0]))
 
 
 def render_colored(V: np.ndarray, F: np.ndarray, colors: np.ndarray, *, view: int = 0, n_views: int = 8,

@@ -54,6 +54,23 @@ def test_continuous_error_is_up_to_one_offset_and_modulo_symmetry():
     assert e["mean_error_deg"] == pytest.approx(2.0 / 3.0) and e["n"] == 3
 
 
+@pytest.mark.parametrize("n", [3, 100])   # 100 shapes: the 36,000 offsets span 55 of the function's blocks
+def test_continuous_error_finds_the_offset_of_least_mean_error_over_the_whole_grid(n):
+    rng = np.random.default_rng(n)
+    truth = rng.uniform(0, 360, n)
+    est = truth + 301.37 + rng.normal(0, 2.0, n)       # best offset far into the grid, past the first blocks
+    orders = rng.integers(0, 4, n)
+    e = continuous_error(est, truth, orders)
+    keep = orders != 0
+    period = 360.0 / orders[keep]
+    offsets = np.arange(0.0, 360.0, 0.01)
+    d = (est - truth)[keep][None, :] - offsets[:, None]
+    means = np.abs(np.mod(d + period / 2, period) - period / 2).mean(axis=1)     # every offset, written apart
+    best = int(np.argmin(means))
+    assert e["offset_deg"] == pytest.approx(offsets[best], abs=1e-9)
+    assert e["mean_error_deg"] == pytest.approx(means[best], rel=1e-12)
+
+
 @pytest.fixture(scope="module")
 def continuous_chairs(tmp_path_factory):
     """Pair costs (N, N, 16) and true degrees (N,) of 12 generated chairs at random continuous azimuths."""

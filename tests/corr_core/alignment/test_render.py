@@ -161,3 +161,11 @@ def test_supersampled_culled_views_are_the_box_average_of_every_ray(asymmetric_m
     fine, _ = render_every_ray(V, F, n_views=3, image_size=2 * SIZE)
     expected = fine.reshape(3, SIZE, 2, SIZE, 2).mean(axis=(2, 4))
     np.testing.assert_array_equal(render_views(V, F, n_views=3, image_size=SIZE, supersample=2), expected)
+
+
+def test_the_rays_of_chosen_views_are_those_views_rays_bit_for_bit():
+    kwargs = {"n_views": 8, "image_size": 20, "elevation_deg": 10.0, "margin": 1.05}
+    every = view_rays(**kwargs)
+    chosen = view_rays(**kwargs, views=(5, 1))
+    assert chosen.shape == (2, 20, 20, 6) and chosen.dtype == np.float32
+    np.testing.assert_array_equal(chosen, every[[5, 1]])
