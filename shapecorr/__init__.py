@@ -10,6 +10,9 @@ PLUGIN = Plugin(
     modules=("shapecorr.alignment", "shapecorr.correspondence", "shapecorr.dense", "shapecorr.generators",
              "shapecorr.figures"),   # figures: mesh pictures of the correspondences, recovered azimuths
     namespaces=("align", "corr", "generate"),
+    # the two libraries its functions import on first use, about half a second each (Open3D: the views and the
+    # mesh pictures; pyplot: every figure), imported by each local worker while the client writes the datasets
+    worker_warmup=("corr_core.open3d_loader:load_open3d", "corr_core.plotting.charts:pyplot"),
     report_packages=("scipy", "open3d", "scikit-image", "potpourri3d", "robust_laplacian", "matplotlib"),
     groups={"alignment": "Problem 1: alignment", "correspondence": "Problem 2: correspondence"},
     headlines=(

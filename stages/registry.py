@@ -115,6 +115,11 @@ class Plugin:
         namespaces: with ``modules``: the first dotted part of every name the plugin registers (``"corr"`` for
             ``"corr.evaluate"``); looking up a name in one imports the plugin's modules. A name registered
             outside them is an error when the modules are imported.
+        worker_warmup: what each worker process of a local cluster does when it starts, after importing
+            ``modules``, for a pipeline that names the plugin: ``"module"`` (imported) or ``"module:function"``
+            (called with no arguments), e.g. the heavy libraries the stage functions import on first use. The
+            workers start while the client is still preparing the run (writing generated datasets), so this
+            work is then off the first tasks' time. One that fails is skipped (the task that needs it reports).
     """
     name: str
     packages: tuple[str, ...] = ()
@@ -124,6 +129,7 @@ class Plugin:
     sweep_metrics: tuple[str, ...] = ()
     modules: tuple[str, ...] = ()
     namespaces: tuple[str, ...] = ()
+    worker_warmup: tuple[str, ...] = ()
 
     def owns(self, module: str) -> bool:
         """True when ``module`` is one of :attr:`packages` or inside one."""
@@ -372,6 +378,22 @@ def import_plugins(plugin_names: Iterable[str]) -> None:
         plugin = _PLUGINS.get(name)
         if plugin is not None and plugin.modules:
             _import_modules(plugin)
+
+
+def warm_up(plugin_names: Iterable[str]) -> None:
+    """Do the ``worker_warmup`` of the loaded plugins named, each entry on its own; an entry that fails is
+    skipped (the task that needs it then reports the error, with its traceback)."""
+    load_library()
+    for name in plugin_names:
+        plugin = _PLUGINS.get(name)
+        for entry in plugin.worker_warmup if plugin is not None else ():
+            module_name, _, function = entry.partition(":")
+            try:
+                module = importlib.import_module(module_name)
+                if function:
+                    getattr(module, function)()
+            except Exception:  # noqa: BLE001 -- only a head start: the task that needs it reports the error
+                pass
 
 
 def names(kind: str | None = None) -> list[str]:

@@ -7,7 +7,8 @@
 - The stage functions' modules are imported now, while the client is still planning and writing generated
   datasets, instead of by the worker's first task (0.7 s here): the plugins (``registry.load_library``), and
   the modules of those the client has imported for its pipeline (``WORKER_IMPORTS_ENV``, set by
-  ``execute.make_client``), not the others. A plugin that fails to import is reported by the task that needs it.
+  ``execute.make_client``), not the others, and then those plugins' ``worker_warmup`` (e.g. the libraries their
+  functions import on first use). A plugin that fails to import is reported by the task that needs it.
 """
 from __future__ import annotations
 
@@ -23,6 +24,8 @@ def dask_setup(worker) -> None:
     try:
         from . import registry
         registry.load_library()
-        registry.import_plugins(filter(None, os.environ.get(WORKER_IMPORTS_ENV, "").split(",")))
+        plugin_names = [n for n in os.environ.get(WORKER_IMPORTS_ENV, "").split(",") if n]
+        registry.import_plugins(plugin_names)
+        registry.warm_up(plugin_names)
     except Exception:  # noqa: BLE001 -- the task that needs the plugin reports the error, with its traceback
         pass

@@ -127,7 +127,8 @@ def test_a_lazy_plugin_registering_outside_its_namespaces_or_half_declared_is_an
 def test_a_pipeline_of_other_plugins_imports_none_of_the_application_and_nor_do_its_workers(tmp_path):
     """The engine running the synthetic test pipeline in its own process (``--workers 0``: nor dask.distributed),
     and the local workers it starts, do not import the application's modules (a second each); once the process has
-    looked up an application function, the workers it starts import them at boot, before their first task."""
+    looked up an application function, the workers it starts import them at boot, before their first task, and do
+    the application's ``worker_warmup`` (pyplot and Open3D)."""
     import subprocess
     import sys
 
@@ -138,7 +139,8 @@ def test_a_pipeline_of_other_plugins_imports_none_of_the_application_and_nor_do_
 import sys
 from stages import api, registry
 from stages.execute import make_client
-probe = lambda: sorted(m for m in ("shapecorr.alignment", "shapecorr.dense") if m in sys.modules)
+probe = lambda: sorted(m for m in ("shapecorr.alignment", "shapecorr.dense", "matplotlib.pyplot", "open3d")
+                       if m in sys.modules)
 api.run({str(path)!r}, workers=0, cache_dir={str(tmp_path / 'cache')!r}, output_dir={str(tmp_path / 'out')!r},
         quiet=True)
 print(probe(), "distributed" in sys.modules)
@@ -156,7 +158,8 @@ for step in ("other", "application"):
                          timeout=300)
     assert res.returncode == 0, res.stderr
     assert res.stdout.splitlines() == ["[] False", "other [] [[]]",
-                                       "application ['shapecorr'] [['shapecorr.alignment', 'shapecorr.dense']]"]
+                                       "application ['shapecorr'] [['matplotlib.pyplot', 'open3d', "
+                                       "'shapecorr.alignment', 'shapecorr.dense']]"]   # + its worker_warmup
 
 
 def test_a_lazy_module_that_cannot_be_imported_is_the_same_error_at_every_look_up(tmp_path, monkeypatch):
@@ -166,3 +169,30 @@ def test_a_lazy_module_that_cannot_be_imported_is_the_same_error_at_every_look_u
         with pytest.raises(PipelineError, match="cannot import module broken_plugin_mod.funcs of plugin "
                                                 "'broken_plugin_mod': No module named 'no_such_dependency_xyz'"):
             registry.get("brokenns.f")
+
+
+WARM_EXTRA = """\
+CALLS = []
+
+def mark():
+    CALLS.append("mark")
+
+def boom():
+    raise RuntimeError("a warm-up that fails")
+"""
+
+
+def test_a_plugins_worker_warmup_imports_and_calls_its_entries_and_skips_those_that_fail(tmp_path, monkeypatch):
+    import dataclasses
+    import sys
+
+    plugin = _lazy_plugin(tmp_path, monkeypatch, "warm_plugin_mod", "warmns", "warmns")
+    (tmp_path / "warm_plugin_mod" / "extra.py").write_text(WARM_EXTRA)
+    registry.add_plugin(dataclasses.replace(plugin, worker_warmup=(
+        "no_such_module_xyz", "warm_plugin_mod.extra:boom", "warm_plugin_mod.extra:no_such_function",
+        "warm_plugin_mod.extra:mark", "warm_plugin_mod.funcs")))
+    registry.warm_up(["warm_plugin_mod", "no_such_plugin"])
+    assert sys.modules["warm_plugin_mod.extra"].CALLS == ["mark"]     # after the failing entries
+    assert "warm_plugin_mod.funcs" in sys.modules
+    registry.warm_up([])
+    assert sys.modules["warm_plugin_mod.extra"].CALLS == ["mark"]     # only the plugins named
