@@ -19,7 +19,7 @@ from bench._env import one_blas_thread  # noqa: E402
 if __name__ == "__main__":
     one_blas_thread()
 
-from corr_core.alignment.measures import _periodic_distance, continuous_error  # noqa: E402
+from corr_core.alignment.measures import periodic_distance, continuous_error  # noqa: E402
 
 OFFSETS = np.arange(0.0, 360.0, 0.01)     # continuous_error's default grid (resolution_deg=0.01)
 
@@ -28,14 +28,14 @@ def means_one_offset_at_a_time(diff: np.ndarray, period: np.ndarray) -> np.ndarr
     """(n_offsets,) mean periodic error per offset, one offset at a time, stacked in blocks of 64 MB (the code
     before 2026-12-07)."""
     step = max(1, (64 << 20) // (8 * diff.size))
-    return np.concatenate([np.stack([_periodic_distance(diff - o, period) for o in OFFSETS[s:s + step]]).mean(axis=1)
+    return np.concatenate([np.stack([periodic_distance(diff - o, period) for o in OFFSETS[s:s + step]]).mean(axis=1)
                            for s in range(0, len(OFFSETS), step)])
 
 
 def means_in_blocks(diff: np.ndarray, period: np.ndarray, values: int) -> np.ndarray:
     """The same, a block of offsets of about ``values`` differences at a time."""
     step = max(1, values // diff.size)
-    return np.concatenate([_periodic_distance(diff[None, :] - OFFSETS[s:s + step, None], period[None, :]).mean(axis=1)
+    return np.concatenate([periodic_distance(diff[None, :] - OFFSETS[s:s + step, None], period[None, :]).mean(axis=1)
                            for s in range(0, len(OFFSETS), step)])
 
 

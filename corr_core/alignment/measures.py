@@ -20,7 +20,7 @@ from corr_core.alignment.solvers import (SOLVERS, knn_neighbors, solve_labels, s
                                         uniform_unary)
 
 __all__ = ["agreement", "seed_stability", "equivariance", "upper_bound", "solver_quality", "ground_truth_agreement",
-           "continuous_error", "mode_agreement", "evaluate_alignment"]
+           "continuous_error", "periodic_distance", "mode_agreement", "evaluate_alignment"]
 
 
 def _size(C) -> tuple[int, int]:
@@ -107,7 +107,7 @@ def solver_quality(C: np.ndarray, solution: dict, peer_labels: dict, restarts: i
     return quality
 
 
-def _periodic_distance(x: np.ndarray, period: np.ndarray) -> np.ndarray:
+def periodic_distance(x: np.ndarray, period: np.ndarray) -> np.ndarray:
     """|x| modulo period (elementwise, broadcasting), in [0, period/2]; 0 where period is 0 (any value fits)."""
     p = np.where(period > 0, period, 1.0)
     return np.where(period > 0, np.abs((x + 0.5 * p) % p - 0.5 * p), 0.0)
@@ -117,7 +117,7 @@ def agreement_modulo(a: np.ndarray, b: np.ndarray, V: int, periods: np.ndarray, 
     """Fraction of items with labels a == b + offset modulo their period (periods (n,) float steps: V for an
     asymmetric shape, V/k for a k-fold symmetric one, 0 = any label fits), best over global offsets 0..V-1."""
     d = np.asarray(a, np.float64)[None, :] - np.asarray(b, np.float64)[None, :] - np.arange(V)[:, None]
-    return float((_periodic_distance(d, np.asarray(periods, np.float64)[None, :]) <= tolerance + 1e-9)
+    return float((periodic_distance(d, np.asarray(periods, np.float64)[None, :]) <= tolerance + 1e-9)
                  .mean(axis=1).max()) if len(a) else 1.0
 
 
@@ -139,10 +139,10 @@ def continuous_error(angles_deg: np.ndarray, truth_deg: np.ndarray, orders: np.n
     # against one offset at a time (the code before), x0.06 of its time at 98 shapes, x0.31 at 1,000, x0.63 at
     # 10,000 (64 MB blocks: x1.46, x0.57, x1.37), the same means bit for bit.
     step = max(1, (1 << 16) // max(1, diff.size))
-    means = np.concatenate([_periodic_distance(diff[None, :] - offsets[s:s + step, None], period[None, :]).mean(axis=1)
+    means = np.concatenate([periodic_distance(diff[None, :] - offsets[s:s + step, None], period[None, :]).mean(axis=1)
                             for s in range(0, len(offsets), step)])
     best = int(np.argmin(means))
-    err = _periodic_distance(diff - offsets[best], period)
+    err = periodic_distance(diff - offsets[best], period)
     return {"mean_error_deg": float(err.mean()), "max_error_deg": float(err.max()),
             "offset_deg": float(offsets[best]), "n": int(keep.sum())}
 
@@ -184,7 +184,7 @@ def ground_truth_agreement(names: list[str], labels: np.ndarray, truth: dict[str
         cont = continuous_error(np.asarray(angles_deg)[both], true, kk)
         nearest = np.rint((true + cont["offset_deg"]) * V / 360.0).astype(np.int64) % V  # in the solution's frame
         kp = np.ones(len(both)) * V if kk is None else np.where(kk > 0, V / np.maximum(kk, 1), 0.0)
-        d = _periodic_distance(labels[both].astype(np.float64) - nearest, kp)
+        d = periodic_distance(labels[both].astype(np.float64) - nearest, kp)
         out.update(mean_error_deg=cont["mean_error_deg"], max_error_deg=cont["max_error_deg"],
                    offset_deg=cont["offset_deg"], labels_mean_error_deg=continuous_error(labels[both] * 360.0 / V, true, kk)["mean_error_deg"],
                    nearest_view_exact=float(np.mean(d < 1e-9)) if both else 1.0)
