@@ -32,6 +32,7 @@ The summary also lists the flipped targets (landmark accuracy < 0.5: a mirrored 
 
 Run:  python bench/correspondence.py [--data SCAPE] [--pairs N] [--json OUT]
                                      [--methods pyfm_none,pyfm_5pts,dense_sparse,dense_auto] [--refine PLAN]
+                                     [--second-opinion]
                                      [--save-maps DIR]
           (--save-maps: every method's map as DIR/<method>/<mesh>.txt, one target vertex id (0-based) a line per
           template vertex, e.g. for ``bench/remesh_scape.py --carry DIR``)
@@ -311,6 +312,8 @@ def main(argv=None) -> int:
                     "extrinsic+deform; default: dense_map's)")
     ap.add_argument("--refine-options", default=None, metavar="JSON",
                     help='the dense methods\' refine_options, e.g. \'{"deform": {"iterations": 6}}\'')
+    ap.add_argument("--second-opinion", action="store_true",
+                    help="dense_auto with dense_map(second_opinion=True) (refine.second_opinion)")
     ap.add_argument("--json", default=None, help="write per-pair and summary results here")
     ap.add_argument("--save-maps", default=None, metavar="DIR",
                     help="also write every map as DIR/<method>/<mesh>.txt (one target vertex id a line)")
@@ -375,7 +378,8 @@ def main(argv=None) -> int:
                     maps[m] = dense_map(Vs, Fs, Vt, Ft, sparse[:, 0], sparse[:, 1], basis_template=S,
                                         basis_target=T, alternative=maps.get("dense_auto"), **plan)
                 else:
-                    maps[m] = dense_map(Vs, Fs, Vt, Ft, basis_template=S, basis_target=T, **plan)
+                    maps[m] = dense_map(Vs, Fs, Vt, Ft, basis_template=S, basis_target=T,
+                                        second_opinion=args.second_opinion, **plan)
             seconds[m] = time.process_time() - t0
         if args.save_maps:
             save_maps(args.save_maps, name, maps)

@@ -1,4 +1,4 @@
-"""A second opinion for the automatic dense map, from its own points (an experiment, not yet in the library).
+"""A second opinion for the automatic dense map, from its own points: its two choice rules compared.
 
 On the course poses the automatic map is worse than the map from the 5 given points (0.010192 against 0.008986,
 session 32), and the gap sits in the legs: the automatic start (the coarse probe's functional map, continued by
@@ -7,7 +7,9 @@ feature points (``init.cached_extremities``) and their images under the refined 
 given points, make the map from them as the sparse mode does (``init.map_from_points``, ``upsample_spectral``),
 refine it with them held, and keep it where it is less distorted than the automatic map. Two rules are scored on
 the same maps: "last" (``refine.map_distortion`` of the two final maps) and "score" (``refine.refinement_score``
-over the plan's steps against the kept hypothesis's score). No ground truth is used by either rule.
+over the plan's steps against the kept hypothesis's score). No ground truth is used by either rule. The library
+has rule "last" as ``refine.second_opinion`` (``dense_map(second_opinion=True)``, off by default); this bench
+makes the map step by step as it does, to score both rules on the same maps.
 
 Data: generated other bodies (``bench/dense_hypotheses.py``'s targets: 6 poses of other people and a decimated,
 vertex-shuffled copy of pose 1 per seed, its settings), never the course poses. Printed per target: the mean

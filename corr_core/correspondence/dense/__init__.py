@@ -28,6 +28,7 @@ from corr_core.correspondence.dense.init import automatic_hypotheses, map_automa
 from corr_core.correspondence.dense.refine import (DEFAULT_REFINE, BestMap, RefineStep, best_with_points,
                                                    map_distortion, points_agreement, refine_best, refine_extrinsic,
                                                    refine_geodesic, refine_map, refine_plan, refine_spectral,
+                                                   second_opinion as refine_second_opinion,
                                                    surviving_after_step, surviving_hypotheses, upsample_spectral,
                                                    with_alternative)
 from corr_core.correspondence.dense.transfer import format_dense_map, read_dense_map, transfer_landmarks
@@ -44,7 +45,8 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
               landmarks_template=None, landmarks_target=None, *, k: int = 100, k_init: int = 40,
               refine: str | list | None = DEFAULT_REFINE, basis_template: MeshBasis | None = None,
               basis_target: MeshBasis | None = None, refine_options: dict | None = None,
-              hypotheses: int | None = None, alternative: np.ndarray | None = None) -> np.ndarray:
+              hypotheses: int | None = None, alternative: np.ndarray | None = None,
+              second_opinion: bool = False) -> np.ndarray:
     """Dense map template -> target.
 
     Args:
@@ -72,6 +74,10 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
             made from them both get the registration once more with the landmarks held, and the less distorted
             of the two is kept (``refine.with_alternative``): given points then do not make the map worse than
             the automatic one.
+        second_opinion: automatic mode only: also make the map from the template's feature points and their
+            images under the automatic map, refined with them held, and keep the less distorted of the two
+            (``refine.second_opinion``; off by default until measured on every set: docs/dense.md "A second
+            opinion from the automatic map's own points").
     Returns:
         (n_s,) int64 target vertex id (original ids) of every template vertex; -1 for template vertices off the
         template's largest connected component (loose pieces, unused vertices: see ``basis``).
@@ -102,6 +108,8 @@ def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarr
     points = None if landmarks_template is None else (S.to_local(ls, what="template landmark"),
                                                       T.to_local(lt, what="target landmark"))
     best = refine_best(S, T, maps, refine, points=points)
+    if second_opinion and points is None:
+        best = refine_second_opinion(S, T, best, refine, k_init=k_init, k_end=k)
     if alternative is not None:
         best = with_alternative(S, T, best, alternative, points, refine=refine)
     return map_to_original(S, T, best.p2p)

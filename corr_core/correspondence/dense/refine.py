@@ -29,12 +29,13 @@ refined map is least distorted (``map_distortion``).
 from __future__ import annotations
 
 import inspect
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from corr_core.correspondence.dense import init
 from corr_core.correspondence.dense.basis import MeshBasis, in_size_of, map_to_local
 from corr_core.correspondence.dense.deform import keep_points, refine_deform, refine_settle
 from corr_core.correspondence.dense.fmaps import fmap_from_p2p
@@ -562,6 +563,33 @@ def with_alternative(source: MeshBasis, target: MeshBasis, best: BestMap, altern
     scores = tuple(map_distortion(source, target, m) for m in held)
     kept = int(np.argmin(scores))
     return BestMap(held[kept], kept, scores)
+
+
+def second_opinion(source: MeshBasis, target: MeshBasis, best: BestMap, refine: str | Sequence | None = DEFAULT_REFINE,
+                   options: Mapping | None = None, *, k_init: int = 40, k_end: int = 100) -> BestMap:
+    """``best`` (an automatic map) or the map made from its own feature points, whichever is less distorted.
+
+    The template's feature points (``init.cached_extremities``) and their images under ``best.p2p`` are taken as
+    given points: the map made from them as the sparse mode makes it (``init.map_from_points``, ``k_init`` /
+    ``k_end`` as there, then ``upsample_spectral``), refined by the plan with them held (``refine_map(points=)``),
+    replaces ``best.p2p`` when its ``map_distortion`` is lower. The automatic start continues a coarse probe's
+    functional map and can leave a limb slid that the refinement shrinks without removing; the images of the
+    feature points under the refined map are closer to the truth than the points detected on the target
+    (docs/dense.md "A second opinion from the automatic map's own points"). No ground truth is used.
+    Returns: ``best``, or a copy of it with the other map as ``p2p`` (the choice among hypotheses, its index,
+        distortions and confidence stay ``best``'s).
+    """
+    P = init.cached_extremities(source)
+    images = np.asarray(best.p2p)[P]
+    if len(P) < 3 or len(np.unique(images)) < len(P):      # map_from_points needs 3 distinct points
+        return best
+    C, samples_map = init.map_from_points(source, target, source.vids[P], target.vids[images], k_init=k_init,
+                                          k_end=k_end)
+    other = refine_map(source, target, upsample_spectral(source, target, C, samples_map), refine, options,
+                       points=(P, images))
+    if map_distortion(source, target, other) < map_distortion(source, target, best.p2p):
+        return replace(best, p2p=other)
+    return best
 
 
 def hold_points(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, refine: str | Sequence | None,

@@ -510,3 +510,37 @@ def test_refine_extrinsic_names_a_misspelt_partner_rule(pair):
     S, T = pair
     with pytest.raises(ValueError, match="partners must be one of"):
         refine_extrinsic(S, T, np.arange(S.n), partners="planar", **FAST)
+
+
+def test_second_opinion_replaces_a_map_with_a_slid_region_and_keeps_the_true_one(pair):
+    """The map made from the template's feature points and their images (right under both maps: the slid disc is
+    on the torso) replaces the map with the slid region, the less distorted; the true map stays, as it is."""
+    from corr_core.correspondence.dense import BestMap, map_distortion
+    from corr_core.correspondence.dense.refine import second_opinion
+
+    S, T = pair
+    plan, options, ks = "extrinsic", {"extrinsic": FAST}, {"k_init": 10, "k_end": 20}
+    slid, region = _slid_region(S, T)
+    best = BestMap(slid, 1, (0.5, map_distortion(S, T, slid)))
+    out = second_opinion(S, T, best, plan, options, **ks)
+    assert not np.array_equal(out.p2p, slid)
+    assert map_distortion(S, T, out.p2p) < map_distortion(S, T, slid)
+    assert _error(T, out.p2p, region) < 0.3 * _error(T, slid, region)
+    assert (out.index, out.distortions) == (best.index, best.distortions)
+    truth = BestMap(np.arange(S.n), 0, (0.1,))
+    assert second_opinion(S, T, truth, plan, options, **ks) is truth
+
+
+def test_dense_map_asks_for_the_second_opinion_in_the_automatic_mode_only(monkeypatch):
+    from corr_core.correspondence import dense
+    from corr_core.generate.humanoid import make_humanoid_rest
+
+    calls = []
+    monkeypatch.setattr(dense, "refine_second_opinion", lambda S, T, best, *a, **k: calls.append(k) or best)
+    V, F = make_humanoid_rest(grid_step=0.09)
+    common = {"k": 12, "k_init": 8, "refine": None}
+    plain = dense.dense_map(V, F, V, F, **common)
+    asked = dense.dense_map(V, F, V, F, second_opinion=True, **common)
+    assert calls == [{"k_init": 8, "k_end": 12}] and np.array_equal(plain, asked)
+    dense.dense_map(V, F, V, F, [0, 1, 2], [0, 1, 2], second_opinion=True, **common)
+    assert len(calls) == 1                                   # given points: no second opinion
