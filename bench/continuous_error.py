@@ -19,7 +19,7 @@ from bench._env import one_blas_thread  # noqa: E402
 if __name__ == "__main__":
     one_blas_thread()
 
-from corr_core.alignment.measures import periodic_distance, continuous_error  # noqa: E402
+from corr_core.alignment.measures import continuous_error, offset_mean_errors, periodic_distance  # noqa: E402
 
 OFFSETS = np.arange(0.0, 360.0, 0.01)     # continuous_error's default grid (resolution_deg=0.01)
 
@@ -29,13 +29,6 @@ def means_one_offset_at_a_time(diff: np.ndarray, period: np.ndarray) -> np.ndarr
     before 2026-12-07)."""
     step = max(1, (64 << 20) // (8 * diff.size))
     return np.concatenate([np.stack([periodic_distance(diff - o, period) for o in OFFSETS[s:s + step]]).mean(axis=1)
-                           for s in range(0, len(OFFSETS), step)])
-
-
-def means_in_blocks(diff: np.ndarray, period: np.ndarray, values: int) -> np.ndarray:
-    """The same, a block of offsets of about ``values`` differences at a time."""
-    step = max(1, values // diff.size)
-    return np.concatenate([periodic_distance(diff[None, :] - OFFSETS[s:s + step, None], period[None, :]).mean(axis=1)
                            for s in range(0, len(OFFSETS), step)])
 
 
@@ -58,7 +51,7 @@ def main() -> None:
         base_s, base = timed(means_one_offset_at_a_time, diff, period)
         cells = []
         for b in blocks:
-            s, means = timed(means_in_blocks, diff, period, b)
+            s, means = timed(lambda: offset_mean_errors(diff, period, OFFSETS, block_values=b))
             if not np.array_equal(means, base):
                 raise SystemExit(f"N={n}, blocks of {b}: the means differ from the loop's")
             cells.append(f"{s:8.3f} s ({s / base_s:4.2f})")

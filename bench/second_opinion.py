@@ -4,8 +4,8 @@ On the course poses the automatic map is worse than the map from the 5 given poi
 session 32), and the gap sits in the legs: the automatic start (the coarse probe's functional map, continued by
 ZoomOut) leaves a thigh slid or twisted that the refinement only shrinks. The experiment here: take the template's
 feature points (``init.cached_extremities``) and their images under the refined automatic map as if they were
-given points, make the map from them as the sparse mode does (``init.map_from_points``, ``upsample_spectral``),
-refine it with them held, and keep it where it is less distorted than the automatic map. Two rules are scored on
+given points, make the map from them as the sparse mode does (``refine.own_points_start``), refine it with them
+held, and keep it where it is less distorted than the automatic map. Two rules are scored on
 the same maps: "last" (``refine.map_distortion`` of the two final maps) and "score" (``refine.refinement_score``
 over the plan's steps against the kept hypothesis's score). No ground truth is used by either rule. The library
 has rule "last" as ``refine.second_opinion`` (``dense_map(second_opinion=True)``, off by default); this bench
@@ -48,16 +48,16 @@ RULES = ("last", "score")
 
 
 def second_opinion(S, T, best: refine.BestMap, plan) -> tuple[np.ndarray, list[float]]:
-    """The map made from the template's extremities and their images under ``best.p2p`` (local ids), refined by
-    ``plan`` with those points held: (p2p (n_s,) int local, map_distortion after each step)."""
-    P = init.cached_extremities(S)
-    images = np.asarray(best.p2p)[P]
-    C, samples_map = init.map_from_points(S, T, S.vids[P], T.vids[images], k_init=SETTINGS["k_init"],
-                                          k_end=SETTINGS["k"])
-    other = upsample_spectral(S, T, C, samples_map)
+    """The map of ``refine.own_points_start(best.p2p)``, refined by ``plan`` with its points held as
+    ``refine.second_opinion`` refines it, one step at a time: (p2p (n_s,) int local, map_distortion after each
+    step); (best.p2p, [inf]) when there are not 3 distinct points (the library then keeps ``best``)."""
+    start = refine.own_points_start(S, T, best.p2p, k_init=SETTINGS["k_init"], k_end=SETTINGS["k"])
+    if start is None:
+        return np.asarray(best.p2p), [float("inf")]
+    other, points = start
     steps = []
     for step in plan:
-        other = step.run(S, T, other, (P, images))
+        other = step.run(S, T, other, points)
         steps.append(refine.map_distortion(S, T, other))
     return other, steps
 

@@ -565,13 +565,27 @@ def with_alternative(source: MeshBasis, target: MeshBasis, best: BestMap, altern
     return BestMap(held[kept], kept, scores)
 
 
+def own_points_start(source: MeshBasis, target: MeshBasis, p2p: np.ndarray, *, k_init: int = 40,
+                     k_end: int = 100) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]] | None:
+    """The map made from a map's own points, before refinement: the template's feature points
+    (``init.cached_extremities``) and their images under ``p2p`` (n_s,) int local, taken as given points and
+    mapped as the sparse mode maps them (``init.map_from_points``, ``k_init`` / ``k_end`` as there, then
+    ``upsample_spectral``). Returns (start (n_s,) int local, (template points (p,), target points (p,)) local), or
+    None when fewer than 3 distinct images (``map_from_points`` needs 3 points)."""
+    P = init.cached_extremities(source)
+    images = np.asarray(p2p)[P]
+    if len(P) < 3 or len(np.unique(images)) < len(P):
+        return None
+    C, samples_map = init.map_from_points(source, target, source.vids[P], target.vids[images], k_init=k_init,
+                                          k_end=k_end)
+    return upsample_spectral(source, target, C, samples_map), (P, images)
+
+
 def second_opinion(source: MeshBasis, target: MeshBasis, best: BestMap, refine: str | Sequence | None = DEFAULT_REFINE,
                    options: Mapping | None = None, *, k_init: int = 40, k_end: int = 100) -> BestMap:
     """``best`` (an automatic map) or the map made from its own feature points, whichever is less distorted.
 
-    The template's feature points (``init.cached_extremities``) and their images under ``best.p2p`` are taken as
-    given points: the map made from them as the sparse mode makes it (``init.map_from_points``, ``k_init`` /
-    ``k_end`` as there, then ``upsample_spectral``), refined by the plan with them held (``refine_map(points=)``),
+    The map of ``own_points_start(best.p2p)``, refined by the plan with its points held (``refine_map(points=)``),
     replaces ``best.p2p`` when its ``map_distortion`` is lower. The automatic start continues a coarse probe's
     functional map and can leave a limb slid that the refinement shrinks without removing; the images of the
     feature points under the refined map are closer to the truth than the points detected on the target
@@ -579,14 +593,10 @@ def second_opinion(source: MeshBasis, target: MeshBasis, best: BestMap, refine: 
     Returns: ``best``, or a copy of it with the other map as ``p2p`` (the choice among hypotheses, its index,
         distortions and confidence stay ``best``'s).
     """
-    P = init.cached_extremities(source)
-    images = np.asarray(best.p2p)[P]
-    if len(P) < 3 or len(np.unique(images)) < len(P):      # map_from_points needs 3 distinct points
+    start = own_points_start(source, target, best.p2p, k_init=k_init, k_end=k_end)
+    if start is None:
         return best
-    C, samples_map = init.map_from_points(source, target, source.vids[P], target.vids[images], k_init=k_init,
-                                          k_end=k_end)
-    other = refine_map(source, target, upsample_spectral(source, target, C, samples_map), refine, options,
-                       points=(P, images))
+    other = refine_map(source, target, start[0], refine, options, points=start[1])
     if map_distortion(source, target, other) < map_distortion(source, target, best.p2p):
         return replace(best, p2p=other)
     return best
