@@ -23,6 +23,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 from . import registry
+from .blas import BLAS_THREAD_ENVIRON, one_blas_thread
 from .errors import UserError, warn_once
 from .plan import Plan, Task, build_plan
 from .status import run_lines
@@ -112,7 +113,7 @@ DASHBOARD_ADDRESS = "127.0.0.1:0"  # this machine only, a free port (see docs/sc
 # 128 KB is mapped and unmapped afresh, and numpy-heavy tasks ran 1.4x (a dense map) to 5x (Möbius scoring) slower
 # in a worker than in a plain process (`python bench/worker_env.py`: see docs/engine.md "Execution"). Memory
 # freed by a task is then kept by the worker process for the next task instead of being returned to the system.
-WORKER_ENVIRON = {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1}
+WORKER_ENVIRON = {var: int(value) for var, value in BLAS_THREAD_ENVIRON.items()}   # as in-process tasks: blas.py
 WORKER_PRELOAD = "stages.worker_boot"   # run by each local worker at start: ignore Ctrl-C, import the stage library
 
 
@@ -223,12 +224,13 @@ def execute(tasks: list[Task], store: Store, client=None, quiet: bool = False, s
         totals[t.stage] = totals.get(t.stage, 0) + 1
     progress = Progress(totals, quiet=quiet, stream=stream)
     if client is None:
-        for t in unique.values():
-            ups = [outcome.results[k] if k in outcome.results else prior[k] for k in t.deps
-                   if k in outcome.results or k in prior]
-            res = run_task(task_call(t, store, t.key in forced), *ups)
-            outcome.results[t.key] = res
-            progress.update(t.stage, res.status.succeeded)
+        with one_blas_thread():   # the threads of a local worker: the same bits as there
+            for t in unique.values():
+                ups = [outcome.results[k] if k in outcome.results else prior[k] for k in t.deps
+                       if k in outcome.results or k in prior]
+                res = run_task(task_call(t, store, t.key in forced), *ups)
+                outcome.results[t.key] = res
+                progress.update(t.stage, res.status.succeeded)
     else:
         _run_on_cluster(unique, store, client, outcome, progress, prior, forced, key_suffix)
     outcome.wall_seconds = time.time() - t0

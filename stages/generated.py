@@ -16,6 +16,7 @@ import shutil
 from typing import Any, Callable
 
 from . import audit, registry
+from .blas import one_blas_thread
 from .config import GeneratedPath, GeneratedSpec, Pipeline
 from .fingerprint import code_fingerprint
 from .checksums import digest_json
@@ -104,10 +105,11 @@ def write_generated(pipe: Pipeline, store: Store, names: list[str], log) -> None
         log(f"generating dataset '{name}' with {gen.generator} {gen.params} -> {gen.path}")
         tmp = store.tmp_dir()
         func = registry.get(gen.generator).func
-        if audit.enabled():
-            audit.audited(lambda: func(out_dir=tmp, **gen.params), f"generator {gen.generator}", func)
-        else:
-            func(out_dir=tmp, **gen.params)
+        with one_blas_thread():   # the same files on any machine, whatever its cores (stages/blas.py)
+            if audit.enabled():
+                audit.audited(lambda: func(out_dir=tmp, **gen.params), f"generator {gen.generator}", func)
+            else:
+                func(out_dir=tmp, **gen.params)
         seal_folder(tmp, {"generator": gen.generator, "params": gen.params})
         os.makedirs(os.path.dirname(gen.path), exist_ok=True)
         try:

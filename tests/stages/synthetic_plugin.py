@@ -157,3 +157,25 @@ def count_skipped(items) -> dict:
     """{"skipped": {name: why} of the items received as ``Skipped``, "kept": how many others}."""
     skipped = {n: v.why for n, v in sorted(items.items()) if isinstance(v, Skipped)}
     return {"skipped": skipped, "kept": len(items) - len(skipped)}
+
+
+def _most_blas_threads() -> int:
+    """The largest thread count of the BLAS/OpenMP libraries loaded in this process."""
+    import threadpoolctl
+    return max(pool["num_threads"] for pool in threadpoolctl.threadpool_info())
+
+
+@register("synthetic.write_blas_threads", kind="generator")
+def write_blas_threads(*, n: int = 2, out_dir: str) -> None:
+    """Generator: ``n`` text files, each holding the BLAS thread count the generator ran with."""
+    threads = _most_blas_threads()
+    for i in range(n):
+        with open(os.path.join(out_dir, f"item{i:03d}.txt"), "w", encoding="utf-8") as fh:
+            fh.write(f"{threads}\n")
+
+
+@register("synthetic.blas_threads", fanout="item")
+def blas_threads(path) -> dict:
+    """{"generator": the BLAS threads written in the item file ``path``, "task": this task's BLAS threads}."""
+    with open(path, encoding="utf-8") as fh:
+        return {"generator": int(fh.read()), "task": _most_blas_threads()}
