@@ -216,12 +216,22 @@ def _write_alignment_csv(path: str, names: list[str], labels: np.ndarray, angles
             w.writerow([n, int(l), f"{a:.2f}", int(k)])
 
 
+ZIP_DATE_TIME = (1980, 1, 1, 0, 0, 0)   # the earliest a zip entry can carry: the same bytes from every run
+
+
 def _zip_folder(folder: str) -> None:
-    """<folder>.zip next to the folder (entries <folder name>/<file>), if the folder exists."""
+    """<folder>.zip next to the folder (entries <folder name>/<file>, in name order), if the folder exists.
+
+    Each entry gets a fixed date and mode instead of its file's: the archive of the same files is the same bytes
+    from every run (with the files' own times, two runs' archives differed while their contents were equal)."""
     if os.path.isdir(folder):
         with zipfile.ZipFile(folder + ".zip", "w", zipfile.ZIP_DEFLATED) as z:
             for fn in sorted(os.listdir(folder)):
-                z.write(os.path.join(folder, fn), arcname=os.path.join(os.path.basename(folder), fn))
+                entry = zipfile.ZipInfo(os.path.join(os.path.basename(folder), fn), date_time=ZIP_DATE_TIME)
+                entry.compress_type = zipfile.ZIP_DEFLATED
+                entry.external_attr = 0o644 << 16
+                with open(os.path.join(folder, fn), "rb") as fh:
+                    z.writestr(entry, fh.read())
 
 
 def _check_export(*, center: str, up: str = "y") -> None:

@@ -85,8 +85,9 @@ def dense_init(template_basis, target_basis, template_mesh, target_mesh, landmar
     how many is decided there when ``hypotheses`` is None -- the best two, more when they are close; an
     integer forces that many, e.g. 1 to time a single hypothesis).
 
-    Returns {"C": (k_end, k_end) float, "p2p_samples": (s,) int local target ids, "mode": str}; auto with more
-    than one hypothesis also "C_more": (h, k_end, k_end) and "p2p_samples_more": (h, s) (the others); sparse
+    Returns {"C": (k_end, k_end) float, "p2p_samples": (s,) int local target ids, "mode": str}; auto also
+    "k_init", "k_end" (for ``corr.dense_refine``'s second opinion, made as the sparse mode makes a map) and, with
+    more than one hypothesis, "C_more": (h, k_end, k_end) and "p2p_samples_more": (h, s) (the others); sparse
     also "points": (2, L) int local ids of the given points (template row, target row).
     """
     if mode not in ("sparse", "auto"):
@@ -98,7 +99,7 @@ def dense_init(template_basis, target_basis, template_mesh, target_mesh, landmar
         except ValueError as exc:  # name the files: the message alone does not say which mesh
             raise ValueError(f"{_which(target_mesh)} (template {_which(template_mesh)}): {exc}; give this mesh "
                              "sparse landmarks and use mode 'sparse', or leave it out") from None
-        out = {"C": C, "p2p_samples": p2p, "mode": mode}
+        out = {"C": C, "p2p_samples": p2p, "mode": mode, "k_init": int(k_init), "k_end": int(k_end)}
         if more:
             out.update(C_more=np.asarray([c for c, _ in more]), p2p_samples_more=np.asarray([p for _, p in more]))
         return out
@@ -122,7 +123,7 @@ def _refine_plan(*, refine, n_patches: int, patch_size: int, rounds: int, icp_it
                                       "settle": {"stiffness": stiffness}})
 
 
-def _check_refine(**params) -> None:
+def _check_refine(*, second_opinion: bool = False, **params) -> None:
     """``corr.dense_refine``'s check when the pipeline is read: the refinement plan must name known steps."""
     try:
         _refine_plan(**params)
@@ -134,7 +135,8 @@ def _check_refine(**params) -> None:
 def dense_refine(template_basis, target_basis, initial, alternative=None, *,
                  refine: str | list[str] = dense.DEFAULT_REFINE,
                  n_patches: int = 300,
-                 patch_size: int = 64, rounds: int = 5, icp_iterations: int = 6, stiffness: float = 0.03) -> dict:
+                 patch_size: int = 64, rounds: int = 5, icp_iterations: int = 6, stiffness: float = 0.03,
+                 second_opinion: bool = False) -> dict:
     """The dense map: the initial map upsampled to every template vertex (``upsample_spectral``), then refined
     (``refine``: steps of ``refine.refine_plan``, joined by "+" or as a list; "extrinsic+spectral+deform" =
     patch-wise rigid ICP, full-resolution ZoomOut, ARAP registration, as ``dense_map``; a step written "spectral?"
@@ -156,7 +158,10 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
     ``alternative`` (another ``corr.dense_refine`` result of the same pair, e.g. dense_auto's) that keeps the given
     points, both maps get the registration once more with the points held and the less distorted is kept
     (``refine.with_alternative``; "hypothesis": "alternative" when it is that one): points do not make a map
-    worse."""
+    worse. ``second_opinion`` (automatic mode): the kept map, or the map made from the template's feature points
+    and their images under it, held through the refinement, whichever is less distorted
+    (``refine.second_opinion``; "hypothesis" and "confidence" stay those of the choice among the initial maps;
+    docs/dense.md "A second opinion from the automatic map's own points")."""
     if is_skipped(initial):
         return skipped(skip_reason(initial))
     S, T = _basis(template_basis, "template"), _basis(target_basis, "target")
@@ -179,6 +184,9 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
         confidence = dense.points_agreement(T, unheld, tuple(points))
     else:
         confidence = best.confidence if len(maps) > 1 else None
+        if second_opinion:
+            best = dense.refine_second_opinion(S, T, best, plan, k_init=int(initial["k_init"]),
+                                               k_end=int(initial["k_end"]))
     out = {"vertex_map": map_to_original(S, T, best.p2p), "hypothesis": hypothesis,
            "distortions": np.asarray(best.distortions),
            "dropped": np.asarray(best.dropped or (False,) * len(best.distortions))}

@@ -180,3 +180,26 @@ def test_course_views_subset_is_equivariant(tmp_path, dask_client):
     assert "ground_truth" not in m
     out = tmp_path / "results" / "align_test" / "export"
     assert len(list((out / "aligned_views").glob("*.png"))) == 12
+
+
+def test_the_aligned_meshes_archive_is_the_same_bytes_whenever_its_files_were_written(tmp_path):
+    """Same results, bit for bit: the zip carries no file times (two runs' archives once differed while their
+    contents were equal); it holds every file under the folder's name, in name order."""
+    import zipfile
+
+    from shapecorr.alignment import _zip_folder
+
+    folder = tmp_path / "aligned_meshes"
+    folder.mkdir()
+    for name, text in (("b.obj", "v 0 0 0\n"), ("a.obj", "v 1 0 0\n")):
+        (folder / name).write_text(text)
+    archives = []
+    for when in (1_000_000_000, 1_700_000_000):           # 2001 and 2023
+        for f in folder.iterdir():
+            os.utime(f, (when, when))
+        _zip_folder(str(folder))
+        archives.append((tmp_path / "aligned_meshes.zip").read_bytes())
+    assert archives[0] == archives[1]
+    with zipfile.ZipFile(tmp_path / "aligned_meshes.zip") as z:
+        assert z.namelist() == ["aligned_meshes/a.obj", "aligned_meshes/b.obj"]
+        assert z.read("aligned_meshes/a.obj") == b"v 1 0 0\n"

@@ -7,6 +7,7 @@ All tests share one cache and one first run (module fixtures), coarse spectral s
 """
 from __future__ import annotations
 
+import dataclasses
 import shutil
 
 import numpy as np
@@ -420,3 +421,35 @@ def test_dense_sparse_confidence_reads_the_points_before_they_are_held():
         assert np.array_equal(out["vertex_map"][ids], target_ids), name
         confidence[name] = out["confidence"]
     assert confidence["pose"] == 1.0 and confidence["misplaced"] < 1.0, confidence
+
+
+def test_dense_refine_asks_for_the_second_opinion_with_the_inits_sizes_in_the_automatic_mode_only(monkeypatch):
+    """``second_opinion``: the automatic map goes to ``refine.second_opinion`` with the k_init / k_end its initial
+    map was made with (recorded by ``corr.dense_init``), and the map it returns is the stage's; never asked by
+    default or with given points."""
+    from corr_core.correspondence import dense
+    from corr_core.correspondence.dense import map_from_points, mesh_basis
+    from corr_core.generate import humanoid
+    from shapecorr.dense import dense_init, dense_refine
+
+    V, F = humanoid.make_humanoid_rest(grid_step=0.09)
+    S = mesh_basis(V, F, k=12, n_samples=200)
+    calls = []
+
+    def other_map(S_, T_, best, plan, **sizes):
+        calls.append(sizes)
+        return dataclasses.replace(best, p2p=best.p2p[::-1].copy())
+    monkeypatch.setattr(dense, "refine_second_opinion", other_map)
+    mesh = {"V": V, "F": F, "name": "rest.obj"}
+    initial = dense_init(S.to_arrays(), S.to_arrays(), mesh, mesh, None, None, mode="auto", k_init=8, k_end=12,
+                         hypotheses=1)
+    plain = dense_refine(S.to_arrays(), S.to_arrays(), initial, refine="none")
+    assert calls == []
+    asked = dense_refine(S.to_arrays(), S.to_arrays(), initial, refine="none", second_opinion=True)
+    assert calls == [{"k_init": 8, "k_end": 12}]
+    assert np.array_equal(asked["vertex_map"], plain["vertex_map"][::-1])
+    ids = np.arange(3)
+    C, p2p = map_from_points(S, S, ids, ids, k_init=8, k_end=12)
+    given = {"C": C, "p2p_samples": p2p, "mode": "sparse", "points": np.stack([ids, ids])}
+    dense_refine(S.to_arrays(), S.to_arrays(), given, refine="none", second_opinion=True)
+    assert len(calls) == 1                                   # given points: no second opinion

@@ -1,25 +1,45 @@
 """Same inputs, same results: two cold runs of the default pipeline (every stage, the default counts), in
-separate caches, one with 2 workers and one with 1, give byte-identical `results --json` (the eigensolvers start
-from a fixed vector: from ARPACK's random start, accuracy.descriptor took five different values over eleven runs).
+separate caches, one on 2 worker processes and one in the command's own process (``--workers 0``, with the
+machine's default BLAS threads), give byte-identical `results --json` and byte-identical published files (the
+eigensolvers start from a fixed vector: from ARPACK's random start, accuracy.descriptor took five different
+values over eleven runs; in-process tasks once ran with every BLAS thread and gave 35 other alignment numbers,
+stages/blas.py; the aligned meshes' zip once carried its files' times).
 
-The 2-worker run is the session's shared audited cold run (``default_cold_run``, conftest.py); the 1-worker run
-is made here, from nothing, in a folder of its own."""
+The 2-worker run is the session's shared audited cold run (``default_cold_run``, conftest.py); the in-process
+run is made here, from nothing, in a folder of its own."""
 from __future__ import annotations
 
+import json
+import os
 import shutil
+from pathlib import Path
 
 import pytest
 
 from tests.helpers import ROOT, cli
 
+RUN_RECORD = ".stages-published.json"   # the engine's record of the publication (when, from which run)
+
+
+def _published(folder: Path) -> dict[str, bytes]:
+    """{relative path: bytes} of every published file under ``folder`` but the run record."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file() and p.name != RUN_RECORD}
+
 
 @pytest.mark.e2e
-def test_two_cold_runs_with_1_and_2_workers_give_identical_results(default_cold_run, tmp_path):
+def test_a_cold_run_in_process_gives_the_bytes_of_a_run_on_2_workers(default_cold_run, tmp_path, monkeypatch):
     assert default_cold_run.res.returncode == 0, default_cold_run.res.stderr[-3000:]
     shutil.copy(ROOT / "pipeline.yaml", tmp_path / "pipeline.yaml")
-    cache, out = tmp_path / "cache1", tmp_path / "out1"
-    res = cli(["run", "pipeline.yaml", "--cache", str(cache), "--out", str(out), "--workers", "1", "--quiet"],
+    cache, out = tmp_path / "cache0", tmp_path / "out0"
+    for var, value in json.loads(os.environ["TESTS_BLAS_ENVIRON_BEFORE"]).items():   # before conftest set 1
+        if value is None:
+            monkeypatch.delenv(var)
+        else:
+            monkeypatch.setenv(var, value)
+    res = cli(["run", "pipeline.yaml", "--cache", str(cache), "--out", str(out), "--workers", "0", "--quiet"],
               cwd=tmp_path, timeout=1200)
+    monkeypatch.undo()
     assert res.returncode == 0, res.stderr[-3000:]
     outputs = []
     for folder, args in ((default_cold_run.folder, []), (tmp_path, ["--cache", str(cache)])):
@@ -28,3 +48,7 @@ def test_two_cold_runs_with_1_and_2_workers_give_identical_results(default_cold_
         outputs.append(res.stdout)
     assert '"accuracy"' in outputs[0]
     assert outputs[0] == outputs[1]
+    two_workers, in_process = _published(default_cold_run.folder / "results" / "demo"), _published(out)
+    assert "align_export/aligned_meshes.zip" in two_workers
+    assert sorted(two_workers) == sorted(in_process)
+    assert [name for name in two_workers if two_workers[name] != in_process[name]] == []

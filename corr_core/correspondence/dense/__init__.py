@@ -38,7 +38,8 @@ __all__ = ["MeshBasis", "mesh_basis", "map_to_original", "dense_map", "map_from_
            "refine_settle",
            "refine_map", "refine_plan", "RefineStep", "refine_spectral", "refine_best", "BestMap",
            "surviving_hypotheses", "surviving_after_step", "best_with_points", "with_alternative", "map_distortion",
-           "points_agreement", "DEFAULT_REFINE", "transfer_landmarks", "format_dense_map", "read_dense_map"]
+           "points_agreement", "refine_second_opinion", "DEFAULT_REFINE", "transfer_landmarks", "format_dense_map",
+           "read_dense_map"]
 
 
 def dense_map(V_template: np.ndarray, F_template: np.ndarray, V_target: np.ndarray, F_target: np.ndarray,
