@@ -288,6 +288,7 @@ class ObjectStore(Store):
         tree = encode(value, arrays)
         writer = uuid.uuid4().hex
         data = self._data(key, writer)
+        committing = False
         try:
             checksums = write_arrays({name: self._zarr_store(f"{data}/{name}.zarr", read_only=False)
                                       for name in arrays}, arrays)
@@ -303,9 +304,11 @@ class ObjectStore(Store):
                         "arrays": checksums, "files": files, "info": info or {}, "location": writer}
             manifest = json.loads(json.dumps(manifest, default=json_default))  # the form a reader sees
             manifest["checksum"] = manifest_checksum(manifest)
+            committing = True
             return self._commit(key, manifest)
         except BaseException as exc:
-            self._remove_quietly(data)
+            if not committing:  # once the manifest's PUT is sent it may be stored (its answer lost): the data
+                self._remove_quietly(data)  # stays, for gc to remove when no manifest names it
             if not isinstance(exc, UserError) and _access_problem(exc) is not None:
                 raise self._unreachable(exc, "write") from None
             raise
@@ -322,6 +325,8 @@ class ObjectStore(Store):
         except FileExistsError:
             pass
         kept = self._quiet_manifest(key)
+        if kept is not None and kept["location"] == manifest["location"]:
+            return manifest  # this writer's own: its create was stored, and a retry of it (answer lost) refused
         if kept is not None and same_content(kept, manifest) and self._missing_parts(key, kept) is None:
             self._remove_quietly(self._data(key, manifest["location"]))  # same key, same content: stored once
             return kept

@@ -6,6 +6,7 @@ reason, when the ``s3`` / ``test`` extras (s3fs, moto[server]) are not installed
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import subprocess
@@ -41,17 +42,39 @@ def s3_endpoint():
 
     port = free_port()
     server = ThreadedMotoServer(ip_address="127.0.0.1", port=port, verbose=False)
-    server.start()
     env = {**S3_ENV, "AWS_ENDPOINT_URL": f"http://127.0.0.1:{port}"}
     saved = {k: os.environ.get(k) for k in env}
-    os.environ.update(env)
-    yield env
-    for k, v in saved.items():
-        if v is None:
-            os.environ.pop(k, None)
-        else:
-            os.environ[k] = v
-    server.stop()
+    with _atomic_conditional_puts():
+        server.start()
+        os.environ.update(env)
+        yield env
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+        server.stop()
+
+
+@contextlib.contextmanager
+def _atomic_conditional_puts():
+    """moto answers a create-only PUT (``If-None-Match: *``) by looking for the object, then storing it, without
+    a lock: two such PUTs of one key at the same moment can both succeed (seen under load), where S3 lets one
+    through. Here they are served one at a time, as S3 would decide them."""
+    from moto.moto_server.werkzeug_app import DomainDispatcherApplication
+
+    lock = threading.Lock()
+    serve = DomainDispatcherApplication.__call__
+
+    def one_create_at_a_time(self, environ, start_response):
+        if environ.get("REQUEST_METHOD") == "PUT" and environ.get("HTTP_IF_NONE_MATCH"):
+            with lock:  # the handler stores the object before it returns
+                return serve(self, environ, start_response)
+        return serve(self, environ, start_response)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(DomainDispatcherApplication, "__call__", one_create_at_a_time)
+        yield
 
 
 @pytest.fixture()
@@ -217,6 +240,36 @@ def test_two_writers_of_one_entry_store_it_once(s3_endpoint, bucket, s3fs_client
     got = store.get(key)
     np.testing.assert_array_equal(got["x"], value["x"])
     assert got["n"] == 3
+
+
+def test_a_create_stored_but_answered_late_keeps_its_data(s3_endpoint, bucket, tmp_path, monkeypatch):
+    """The manifest's create-only PUT is stored, but its answer is lost: the client's retry is refused (the
+    manifest is there: this writer's own). The writer keeps its data, and the entry is complete. The same when
+    the answer never comes (the put fails): the manifest may name the data, so the data stays (for gc)."""
+    monkeypatch.setenv("STAGES_LOCAL_CACHE", str(tmp_path / "local"))
+    from stages.object_store import ObjectStore
+
+    create = ObjectStore._create
+    refusal: list[BaseException] = []
+
+    def stored_then_refused(self, path, data):
+        create(self, path, data)
+        if "/manifest/" in path:
+            raise refusal[0]
+
+    monkeypatch.setattr(ObjectStore, "_create", stored_then_refused)
+    value = {"x": np.arange(6.0), "n": 2}
+    for i, error in enumerate([FileExistsError("the retry: At least one of the pre-conditions did not hold"),
+                               UserError("cannot write the cache: the endpoint does not answer")]):
+        refusal[:] = [error]
+        store, key = open_store(f"s3://{bucket}/c"), f"ef{i}" + "2" * 29
+        if isinstance(error, FileExistsError):
+            assert store.put(key, value)["location"] == store.manifest(key)["location"]
+        else:
+            with pytest.raises(UserError):
+                store.put(key, value)
+        assert store.has(key), error
+        np.testing.assert_array_equal(store.get(key)["x"], value["x"])
 
 
 def test_a_result_with_other_content_replaces_the_stored_one(s3_endpoint, bucket, tmp_path, monkeypatch):
