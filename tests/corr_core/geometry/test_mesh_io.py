@@ -185,3 +185,21 @@ def test_save_obj_roundtrip(tmp_path):
     V, F2 = load_mesh(tmp_path / "m.obj")
     np.testing.assert_allclose(V, V5, rtol=1e-8)
     np.testing.assert_array_equal(F2, F)
+
+
+def test_save_obj_writes_each_coordinate_as_9_significant_digits_and_1_based_faces(tmp_path):
+    """The bytes are those of ``v {x:.9g} {y:.9g} {z:.9g}`` / ``f {a+1} {b+1} {c+1}`` lines (files written by
+    earlier versions stay byte-identical), for float64 and float32 vertices, int32 faces and special values."""
+    rng = np.random.default_rng(3)
+    V = rng.standard_normal((300, 3)) * 10.0 ** rng.integers(-9, 9, size=(300, 3))
+    V[:3] = [[0.0, -0.0, np.nan], [np.inf, -np.inf, 1e-320], [1 / 3, 2 / 3, 123456789.125]]
+    F = rng.integers(0, 300, size=(500, 3))
+    for V_, F_ in ((V, F), (V.astype(np.float32), F.astype(np.int32))):
+        save_obj(tmp_path / "m.obj", V_, F_)
+        expected = ("".join(f"v {x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in V_)
+                    + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in F_))
+        assert (tmp_path / "m.obj").read_text() == expected
+    save_obj(tmp_path / "points.obj", V[:2], [])
+    assert (tmp_path / "points.obj").read_text() == "v 0 -0 nan\nv inf -inf 9.99988867e-321\n"   # a subnormal
+    with pytest.raises(ValueError, match="points2.obj"):
+        save_obj(tmp_path / "points2.obj", V[:, :2], F)
