@@ -22,9 +22,11 @@ RUN_RECORD = ".stages-published.json"   # the engine's record of the publication
 
 
 def _published(folder: Path) -> dict[str, bytes]:
-    """{relative path: bytes} of every published file under ``folder`` but the run record."""
-    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
-            if p.is_file() and p.name != RUN_RECORD}
+    """{relative path: bytes} of every file the run record of ``folder`` lists (the stages' files and the run's
+    own, e.g. metrics.json; not what other commands wrote there since, e.g. a report)."""
+    record = json.loads((folder / RUN_RECORD).read_text())["data"]
+    names = {name for files in record["stages"].values() for name in files} | set(record["files"])
+    return {name: (folder / name).read_bytes() for name in sorted(names)}
 
 
 @pytest.mark.e2e
@@ -49,6 +51,6 @@ def test_a_cold_run_in_process_gives_the_bytes_of_a_run_on_2_workers(default_col
     assert '"accuracy"' in outputs[0]
     assert outputs[0] == outputs[1]
     two_workers, in_process = _published(default_cold_run.folder / "results" / "demo"), _published(out)
-    assert "align_export/aligned_meshes.zip" in two_workers
+    assert "align_export/aligned_meshes.zip" in two_workers and "metrics.json" in two_workers
     assert sorted(two_workers) == sorted(in_process)
     assert [name for name in two_workers if two_workers[name] != in_process[name]] == []
