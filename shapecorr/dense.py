@@ -185,6 +185,9 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
     else:
         confidence = best.confidence if len(maps) > 1 else None
         if second_opinion:
+            if "k_init" not in initial or "k_end" not in initial:
+                raise ValueError("corr.dense_refine: second_opinion needs the initial map's k_init and k_end, which "
+                                 "corr.dense_init records; give 'initial' those keys (or second_opinion: false)")
             best = dense.refine_second_opinion(S, T, best, plan, k_init=int(initial["k_init"]),
                                                k_end=int(initial["k_end"]))
     out = {"vertex_map": map_to_original(S, T, best.p2p), "hypothesis": hypothesis,

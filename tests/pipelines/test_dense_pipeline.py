@@ -448,6 +448,9 @@ def test_dense_refine_asks_for_the_second_opinion_with_the_inits_sizes_in_the_au
     asked = dense_refine(S.to_arrays(), S.to_arrays(), initial, refine="none", second_opinion=True)
     assert calls == [{"k_init": 8, "k_end": 12}]
     assert np.array_equal(asked["vertex_map"], plain["vertex_map"][::-1])
+    with pytest.raises(ValueError, match="k_init and k_end"):
+        dense_refine(S.to_arrays(), S.to_arrays(), {k: v for k, v in initial.items() if k != "k_init"},
+                     refine="none", second_opinion=True)
     ids = np.arange(3)
     C, p2p = map_from_points(S, S, ids, ids, k_init=8, k_end=12)
     given = {"C": C, "p2p_samples": p2p, "mode": "sparse", "points": np.stack([ids, ids])}
