@@ -22,10 +22,10 @@ RUN_RECORD = ".stages-published.json"   # the engine's record of the publication
 
 
 def _published(folder: Path) -> dict[str, bytes]:
-    """{relative path: bytes} of every file the run record of ``folder`` lists (the stages' files and the run's
-    own, e.g. metrics.json; not what other commands wrote there since, e.g. a report)."""
+    """{relative path: bytes} of the stages' files the run record of ``folder`` lists, and metrics.json (not what
+    other commands published there since: another e2e test writes report.html into the shared run's folder)."""
     record = json.loads((folder / RUN_RECORD).read_text())["data"]
-    names = {name for files in record["stages"].values() for name in files} | set(record["files"])
+    names = {name for files in record["stages"].values() for name in files} | {"metrics.json"}
     return {name: (folder / name).read_bytes() for name in sorted(names)}
 
 
