@@ -76,28 +76,3 @@ def test_a_run_starts_every_task_of_the_longest_chain_before_a_shorter_chain_wri
 
     assert len(started("long1")) == len(started("short")) == 8
     assert max(started("long1")) <= min(started("short"))
-
-
-# ---- in this process (--workers 0): one BLAS thread, as in a worker ------------------------------------
-from tests.helpers import cli  # noqa: E402
-
-BLAS_YAML = """\
-name: blas
-generated:
-  things: {generator: synthetic.write_blas_threads, params: {n: 2}}
-datasets:
-  items: {files: "${generated.things}/*.txt"}
-stages:
-  threads: {function: synthetic.blas_threads, foreach: items, inputs: {path: items}}
-"""
-
-
-def test_tasks_and_generators_run_in_this_process_get_one_blas_thread_as_in_a_worker(tmp_path):
-    """A multi-threaded BLAS gives other last bits than a worker's one thread (stages/blas.py); the subprocess
-    asks for 2 threads, as on a machine with 2 cores and no variables set (this file's conftest sets 1)."""
-    p = make_project(tmp_path, n=0, yaml_text=BLAS_YAML)
-    env = dict.fromkeys(("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"), "2")
-    res = cli(["run", str(p), "--workers", "0", "--quiet", "--cache", "cache"], cwd=tmp_path, env=env)
-    assert res.returncode == 0, res.stderr[-3000:]
-    seen = [api.result(str(p), "threads", f"item{i:03d}", cache_dir=str(tmp_path / "cache")) for i in range(2)]
-    assert seen == [{"generator": 1, "task": 1}] * 2
