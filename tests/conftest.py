@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 import threadpoolctl
 
-from tests.helpers import COURSE_DATA, SYNTHETIC_PLUGIN
+from stages.blas import BLAS_THREAD_ENVIRON
+from tests.helpers import BLAS_ENVIRON_BEFORE, COURSE_DATA, SYNTHETIC_PLUGIN, machine_blas_environ
 
 # One BLAS/OpenMP thread in each test process: the 2 pytest-xdist workers already fill the 2 cores, and a second
 # thread per worker only competed with the other worker (the dense-map unit tests took 81 s instead of 47 s, the
@@ -17,12 +18,10 @@ from tests.helpers import COURSE_DATA, SYNTHETIC_PLUGIN
 # variables reach the libraries loaded later (scipy's OpenBLAS, OpenMP) and the processes the tests start;
 # threadpool_limits sets the libraries already loaded (a pytest plugin imports numpy before this file). The
 # engine's own worker processes get the same from stages.execute.WORKER_ENVIRON (see ``dask_client``).
-BLAS_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-# the values before this file, kept for the processes this one starts (pytest-xdist's workers load it again)
-os.environ.setdefault("TESTS_BLAS_ENVIRON_BEFORE",
-                      json.dumps({var: os.environ.get(var) for var in BLAS_THREAD_VARIABLES}))
-_ENVIRON_BEFORE = json.loads(os.environ["TESTS_BLAS_ENVIRON_BEFORE"])
-os.environ.update(dict.fromkeys(BLAS_THREAD_VARIABLES, "1"))
+# the values before this file, kept for the processes this one starts (pytest-xdist's workers load it again):
+# ``machine_blas_environ`` puts them back
+os.environ.setdefault(BLAS_ENVIRON_BEFORE, json.dumps({var: os.environ.get(var) for var in BLAS_THREAD_ENVIRON}))
+os.environ.update(BLAS_THREAD_ENVIRON)
 threadpoolctl.threadpool_limits(1)
 
 # The synthetic.* stage functions are a test-only plugin, loaded through the STAGES_PLUGINS development hook
@@ -36,11 +35,7 @@ def dask_client(tmp_path_factory):
     from stages.execute import make_client
 
     with pytest.MonkeyPatch.context() as mp:   # the workers' one thread must come from the engine, not this file
-        for var, value in _ENVIRON_BEFORE.items():
-            if value is None:
-                mp.delenv(var, raising=False)
-            else:
-                mp.setenv(var, value)
+        machine_blas_environ(mp)
         client = make_client(workers=2, local_dir=str(tmp_path_factory.mktemp("dask")))
     yield client
     cluster = client.cluster

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import os
 import signal
@@ -12,6 +13,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+# the BLAS thread variables as they were before tests/conftest.py set one thread (JSON {variable: value or null})
+BLAS_ENVIRON_BEFORE = "TESTS_BLAS_ENVIRON_BEFORE"
 COURSE_DATA = ROOT.parent / "shared" / "data" / "hw3"
 SYNTHETIC_PLUGIN = "tests.stages.synthetic_plugin"   # the test-only stage functions (synthetic.*)
 
@@ -330,3 +333,13 @@ def logged(name: str = "corr_core.geometry.repair"):
         yield messages
     finally:
         logger.removeHandler(handler)
+
+
+def machine_blas_environ(mp) -> None:
+    """Put back, through ``mp`` (a ``pytest.MonkeyPatch``), the BLAS thread variables found before
+    tests/conftest.py set one thread: a process started then gets the machine's threads, or the engine's."""
+    for var, value in json.loads(os.environ[BLAS_ENVIRON_BEFORE]).items():
+        if value is None:
+            mp.delenv(var, raising=False)
+        else:
+            mp.setenv(var, value)

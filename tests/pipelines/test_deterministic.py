@@ -10,13 +10,12 @@ run is made here, from nothing, in a folder of its own."""
 from __future__ import annotations
 
 import json
-import os
 import shutil
 from pathlib import Path
 
 import pytest
 
-from tests.helpers import ROOT, cli
+from tests.helpers import ROOT, cli, machine_blas_environ
 
 RUN_RECORD = ".stages-published.json"   # the engine's record of the publication (when, from which run)
 
@@ -34,11 +33,7 @@ def test_a_cold_run_in_process_gives_the_bytes_of_a_run_on_2_workers(default_col
     assert default_cold_run.res.returncode == 0, default_cold_run.res.stderr[-3000:]
     shutil.copy(ROOT / "pipeline.yaml", tmp_path / "pipeline.yaml")
     cache, out = tmp_path / "cache0", tmp_path / "out0"
-    for var, value in json.loads(os.environ["TESTS_BLAS_ENVIRON_BEFORE"]).items():   # before conftest set 1
-        if value is None:
-            monkeypatch.delenv(var)
-        else:
-            monkeypatch.setenv(var, value)
+    machine_blas_environ(monkeypatch)   # the machine's threads, as before tests/conftest.py set one
     res = cli(["run", "pipeline.yaml", "--cache", str(cache), "--out", str(out), "--workers", "0", "--quiet"],
               cwd=tmp_path, timeout=1200)
     monkeypatch.undo()

@@ -25,7 +25,7 @@ def test_tasks_and_generators_run_in_this_process_get_one_blas_thread_as_in_a_wo
     """A multi-threaded BLAS gives other last bits than a worker's one thread (stages/blas.py); the subprocess
     asks for 2 threads, as on a machine with 2 cores and no variables set (the tests' conftest sets 1)."""
     p = make_project(tmp_path, n=0, yaml_text=BLAS_YAML)
-    env = dict.fromkeys(("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"), "2")
+    env = dict.fromkeys(BLAS_THREAD_ENVIRON, "2")
     res = cli(["run", str(p), "--workers", "0", "--quiet", "--cache", "cache"], cwd=tmp_path, env=env)
     assert res.returncode == 0, res.stderr[-3000:]
     seen = [api.result(str(p), "threads", f"item{i:03d}", cache_dir=str(tmp_path / "cache")) for i in range(2)]
