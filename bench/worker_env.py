@@ -1,5 +1,7 @@
 """The same numpy-heavy work in this process and in a dask worker, with dask's default worker environment and
-with the engine's (``stages.execute.WORKER_ENVIRON``): the cost of MALLOC_TRIM_THRESHOLD_.
+with the engine's (``stages.execute.WORKER_ENVIRON``): the cost of MALLOC_TRIM_THRESHOLD_; then with the engine's
+environment and dask's profiler on, as dask has it, and off, as the engine's local workers have it
+(``stages.execute.worker_profile_config``): the cost of the profiler.
 
 The work: ``mobius.score_maps`` (600 random triplet maps, 300 x 300 samples, as ``corr.match_mobius`` scores 5
 sparse landmarks) and a dense map between two generated humanoid poses (``dense_map`` with its defaults on
@@ -51,21 +53,23 @@ def best_of(job, repeats: int = 3) -> float:
     return min(job() for _ in range(repeats))
 
 
-def in_worker(environ: dict, jobs) -> list[float]:
-    """Best seconds of each job in a 1-worker LocalCluster whose worker process gets ``environ``."""
+def in_worker(environ: dict, jobs, profile: bool = True) -> list[float]:
+    """Best seconds of each job in a 1-worker LocalCluster whose worker process gets ``environ``, with dask's
+    profiler on or off."""
     saved = {k: os.environ.pop(k) for k in ("MALLOC_TRIM_THRESHOLD_",) if k in os.environ}
     try:        # the nanny also sets its variables in this process, whose environment a later worker inherits
-        return _run_jobs(environ, jobs)
+        return _run_jobs(environ, jobs, profile)
     finally:
         os.environ.pop("MALLOC_TRIM_THRESHOLD_", None)
         os.environ.update(saved)
 
 
-def _run_jobs(environ: dict, jobs) -> list[float]:
+def _run_jobs(environ: dict, jobs, profile: bool) -> list[float]:
     import dask
     from distributed import Client, LocalCluster
 
-    with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": environ,
+                          "distributed.worker.profile.enabled": profile}):
         with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
                 Client(cluster) as client:
             out = []
@@ -86,7 +90,9 @@ def main() -> int:
     here = [best_of(job) for job in jobs]
     dask_default = dict(dask.config.get("distributed.nanny.pre-spawn-environ"))
     places = {"this process": here, f"worker, dask's environment {dask_default}": in_worker(dask_default, jobs),
-              f"worker, the engine's {WORKER_ENVIRON}": in_worker(dict(WORKER_ENVIRON), jobs)}
+              f"worker, the engine's {WORKER_ENVIRON}, dask's profiler on": in_worker(dict(WORKER_ENVIRON), jobs),
+              f"worker, the engine's {WORKER_ENVIRON}, profiler off (the engine's local workers)":
+                  in_worker(dict(WORKER_ENVIRON), jobs, profile=False)}
     for place, seconds in places.items():
         print(place)
         for job, s, h in zip(jobs, seconds, here):

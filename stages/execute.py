@@ -114,6 +114,11 @@ DASHBOARD_ADDRESS = "127.0.0.1:0"  # this machine only, a free port (see docs/sc
 # in a worker than in a plain process (`python bench/worker_env.py`: see docs/engine.md "Execution"). Memory
 # freed by a task is then kept by the worker process for the next task instead of being returned to the system.
 WORKER_ENVIRON = {var: int(value) for var, value in BLAS_THREAD_ENVIRON.items()}   # as in-process tasks: blas.py
+# dask's statistical profiler (``distributed.worker.profile``) wakes every 10 ms in each worker to walk the stack of
+# its task thread: with numpy-heavy tasks of deep Python stacks that cost 1.1-1.2x in task time (`python
+# bench/worker_env.py`, see docs/engine.md "Execution"). Off in the local workers unless the variable below is set
+# (the dashboard's Profile page is then empty); a ``--scheduler`` cluster keeps its own setting.
+WORKER_PROFILE_ENV = "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED"
 WORKER_PRELOAD = "stages.worker_boot"   # run by each local worker at start: ignore Ctrl-C, import the stage library
 
 
@@ -140,7 +145,7 @@ def make_client(workers: int = 2, scheduler: str | None = None, local_dir: str |
     dask.config.set({"distributed.worker.daemon": True, "distributed.admin.tick.limit": "60s",
                      "distributed.worker.memory.terminate": False,
                      "distributed.nanny.pre-spawn-environ": dict(WORKER_ENVIRON),
-                     "distributed.worker.preload": [WORKER_PRELOAD]})
+                     "distributed.worker.preload": [WORKER_PRELOAD], **worker_profile_config()})
     with _ctrl_c_ignored_by_children():
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                dashboard_address=DASHBOARD_ADDRESS, local_directory=local_dir,
@@ -151,6 +156,12 @@ def make_client(workers: int = 2, scheduler: str | None = None, local_dir: str |
     if log is not None and cluster.dashboard_link:
         log(f"dask dashboard: {cluster.dashboard_link}")
     return Client(cluster)
+
+
+def worker_profile_config() -> dict:
+    """The dask setting of the local workers' profiler: off, unless ``WORKER_PROFILE_ENV`` is set (then dask
+    reads it, whatever it says)."""
+    return {} if WORKER_PROFILE_ENV in os.environ else {"distributed.worker.profile.enabled": False}
 
 
 def _connect(Client, address: str):

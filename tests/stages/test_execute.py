@@ -1,5 +1,6 @@
 """The local cluster's worker processes: one BLAS thread each, and no MALLOC_TRIM_THRESHOLD_ (dask's default
-makes numpy-heavy tasks 2-3x slower in a worker: stages.execute.WORKER_ENVIRON)."""
+makes numpy-heavy tasks 2-3x slower in a worker: stages.execute.WORKER_ENVIRON), and no dask profiler (1.1-1.2x:
+stages.execute.worker_profile_config)."""
 from __future__ import annotations
 
 import os
@@ -14,6 +15,24 @@ def test_local_workers_run_with_one_blas_thread_and_glibcs_own_malloc_thresholds
     assert len(seen) == 2
     for env in seen.values():
         assert env == {"MALLOC_TRIM_THRESHOLD_": None, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+
+
+def _profiler_on() -> bool:
+    import dask
+    return bool(dask.config.get("distributed.worker.profile.enabled"))
+
+
+def test_local_workers_run_without_dasks_profiler(dask_client):
+    assert list(dask_client.run(_profiler_on).values()) == [False, False]
+
+
+def test_the_profiler_variable_given_by_the_user_is_left_to_dask(monkeypatch):
+    from stages.execute import WORKER_PROFILE_ENV, worker_profile_config
+
+    monkeypatch.delenv(WORKER_PROFILE_ENV, raising=False)
+    assert worker_profile_config() == {"distributed.worker.profile.enabled": False}
+    monkeypatch.setenv(WORKER_PROFILE_ENV, "True")
+    assert worker_profile_config() == {}
 
 
 # ---- the order tasks are handed to the workers ------------------------------------------------------
