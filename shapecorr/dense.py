@@ -161,7 +161,8 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
     worse. ``second_opinion`` (automatic mode): the kept map, or the map made from the template's feature points
     and their images under it, held through the refinement, whichever is less distorted
     (``refine.second_opinion``; "hypothesis" and "confidence" stay those of the choice among the initial maps;
-    docs/dense.md "A second opinion from the automatic map's own points")."""
+    docs/dense.md "A second opinion from the automatic map's own points"); asked with given points it is a
+    ValueError (it would do nothing)."""
     if is_skipped(initial):
         return skipped(skip_reason(initial))
     S, T = _basis(template_basis, "template"), _basis(target_basis, "target")
@@ -172,6 +173,10 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
     plan = _refine_plan(refine=refine, n_patches=n_patches, patch_size=patch_size, rounds=rounds,
                         icp_iterations=icp_iterations, stiffness=stiffness)
     points = np.asarray(initial["points"]) if "points" in initial else None
+    if second_opinion and points is not None:
+        raise ValueError("corr.dense_refine: second_opinion is for the automatic mode, and this initial map was made "
+                         "from given points (corr.dense_init mode 'sparse'); set second_opinion only on the stage "
+                         "that refines the automatic map (e.g. --set dense_auto.second_opinion=true)")
     best = dense.refine_best(S, T, maps, plan, points=None if points is None else tuple(points))
     hypothesis = best.index
     if points is not None:

@@ -426,7 +426,7 @@ def test_dense_sparse_confidence_reads_the_points_before_they_are_held():
 def test_dense_refine_asks_for_the_second_opinion_with_the_inits_sizes_in_the_automatic_mode_only(monkeypatch):
     """``second_opinion``: the automatic map goes to ``refine.second_opinion`` with the k_init / k_end its initial
     map was made with (recorded by ``corr.dense_init``), and the map it returns is the stage's; never asked by
-    default or with given points."""
+    by default, and an error with given points (it would do nothing there)."""
     from corr_core.correspondence import dense
     from corr_core.correspondence.dense import map_from_points, mesh_basis
     from corr_core.generate import humanoid
@@ -454,5 +454,7 @@ def test_dense_refine_asks_for_the_second_opinion_with_the_inits_sizes_in_the_au
     ids = np.arange(3)
     C, p2p = map_from_points(S, S, ids, ids, k_init=8, k_end=12)
     given = {"C": C, "p2p_samples": p2p, "mode": "sparse", "points": np.stack([ids, ids])}
-    dense_refine(S.to_arrays(), S.to_arrays(), given, refine="none", second_opinion=True)
-    assert len(calls) == 1                                   # given points: no second opinion
+    with pytest.raises(ValueError, match="second_opinion is for the automatic mode"):
+        dense_refine(S.to_arrays(), S.to_arrays(), given, refine="none", second_opinion=True)
+    dense_refine(S.to_arrays(), S.to_arrays(), given, refine="none")
+    assert len(calls) == 1                                   # given points: never a second opinion
