@@ -1,6 +1,7 @@
 """The dense map's tuned constants, one at a time, on generated bodies (never the course poses): the chirality
 weight of the probes' point features (``init.CHIRALITY_WEIGHT``), the ARAP stiffness (``refine_deform``), the
-number of patches and their size (``refine_extrinsic``'s ``n_patches``, ``patch_size``).
+number of patches, their size and the ICP iterations per round (``refine_extrinsic``'s ``n_patches``,
+``patch_size``, ``icp_iterations``).
 
 Per seed, ``write_humanoid_dataset(n_poses, seed, vary_bodies=True)`` (each pose another person) with a decimated,
 vertex-shuffled copy of pose 1 (other connectivity); the truth (vertex i <-> i, or the generator's ground truth for
@@ -20,7 +21,8 @@ Settings as ``bench/dense_hypotheses.py`` (k 60, 1000 samples, 150 patches: the 
 the code default 300 goes with 2000 samples, pipelines/scape.yaml, the same fraction of the samples).
 
 Run:  python bench/dense_constants.py [--seeds 10-13] [--poses 4] [--chirality 0,0.15,0.5]
-          [--stiffness 0.015,0.02,0.04,0.05,0.08] [--n-patches 75,100,300] [--patch-size 32,96,128,192] [--json OUT]
+          [--stiffness 0.015,0.02,0.04,0.05,0.08] [--n-patches 75,100,300] [--patch-size 32,96,128,192]
+          [--icp-iterations 2,3,4] [--json OUT]
       (an empty list skips that constant; an existing --json file is resumed: settings already in it are not run
       again, and the summary covers all of them)
 """
@@ -44,7 +46,8 @@ import numpy as np  # noqa: E402
 from bench.dense_hypotheses import (SETTINGS, generated_targets, generated_template, resumed_results,  # noqa: E402
                                    seed_range)
 
-DEFAULTS = {"chirality": 0.3, "stiffness": 0.03, "n_patches": SETTINGS["n_patches"], "patch_size": 64}
+DEFAULTS = {"chirality": 0.3, "stiffness": 0.03, "n_patches": SETTINGS["n_patches"], "patch_size": 64,
+            "icp_iterations": 6}
 BEFORE_DEFORM = "extrinsic+spectral"
 
 
@@ -57,7 +60,8 @@ def check_defaults() -> None:
 
     code = {"chirality": init.CHIRALITY_WEIGHT,
             "stiffness": inspect.signature(refine_deform).parameters["stiffness"].default,
-            "patch_size": inspect.signature(refine.refine_extrinsic).parameters["patch_size"].default}
+            "patch_size": inspect.signature(refine.refine_extrinsic).parameters["patch_size"].default,
+            "icp_iterations": inspect.signature(refine.refine_extrinsic).parameters["icp_iterations"].default}
     wrong = {k: (v, DEFAULTS[k]) for k, v in code.items() if v != DEFAULTS[k]}
     if wrong:
         raise SystemExit(f"bench/dense_constants.py: DEFAULTS differ from the code's (code, bench): {wrong}")
@@ -137,7 +141,8 @@ class Target:
 
 
 def extrinsic_options(**changed) -> dict:
-    return {"n_patches": DEFAULTS["n_patches"], "patch_size": DEFAULTS["patch_size"], **changed}
+    return {"n_patches": DEFAULTS["n_patches"], "patch_size": DEFAULTS["patch_size"],
+            "icp_iterations": DEFAULTS["icp_iterations"], **changed}
 
 
 def run_setting(t: Target, name: str, value: float) -> dict:
@@ -168,7 +173,7 @@ def run_setting(t: Target, name: str, value: float) -> dict:
 
 
 GROUPS = (("chirality", "chirality"), ("stiffness", "stiffness"), ("n_patches", "patches"),
-          ("patch_size", "patches"))
+          ("patch_size", "patches"), ("icp_iterations", "patches"))
 
 
 def setting_key(name: str, value: float) -> str:
@@ -225,12 +230,14 @@ def main(argv=None) -> int:
     ap.add_argument("--stiffness", default="0.015,0.02,0.04,0.05,0.08")
     ap.add_argument("--n-patches", default="75,100,300")
     ap.add_argument("--patch-size", default="32,96,128,192")
+    ap.add_argument("--icp-iterations", default="", help="e.g. 2,3,4 (default: none besides the code's 6)")
     ap.add_argument("--work", default=None, help="folder for the generated data (default: a temporary one)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
     check_defaults()
     grid = {"chirality": floats(args.chirality), "stiffness": floats(args.stiffness),
-            "n_patches": floats(args.n_patches), "patch_size": floats(args.patch_size)}
+            "n_patches": floats(args.n_patches), "patch_size": floats(args.patch_size),
+            "icp_iterations": floats(args.icp_iterations)}
     wanted = [("default", 0)] + [(name, v) for name, _ in GROUPS for v in grid[name] if v != DEFAULTS[name]]
 
     from corr_core.correspondence.dense import basis
