@@ -165,6 +165,13 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
     ValueError (it would do nothing)."""
     if is_skipped(initial):
         return skipped(skip_reason(initial))
+    if second_opinion and "points" in initial:              # checked before any work: the item fails at once
+        raise ValueError("corr.dense_refine: second_opinion is for the automatic mode, and this initial map was made "
+                         "from given points (corr.dense_init mode 'sparse'); set second_opinion only on the stage "
+                         "that refines the automatic map (e.g. --set dense_auto.second_opinion=true)")
+    if second_opinion and ("k_init" not in initial or "k_end" not in initial):
+        raise ValueError("corr.dense_refine: second_opinion needs the initial map's k_init and k_end, which "
+                         "corr.dense_init records; give 'initial' those keys (or second_opinion: false)")
     S, T = _basis(template_basis, "template"), _basis(target_basis, "target")
     starts = [(initial["C"], initial["p2p_samples"])]
     if "C_more" in initial:
@@ -173,10 +180,6 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
     plan = _refine_plan(refine=refine, n_patches=n_patches, patch_size=patch_size, rounds=rounds,
                         icp_iterations=icp_iterations, stiffness=stiffness)
     points = np.asarray(initial["points"]) if "points" in initial else None
-    if second_opinion and points is not None:
-        raise ValueError("corr.dense_refine: second_opinion is for the automatic mode, and this initial map was made "
-                         "from given points (corr.dense_init mode 'sparse'); set second_opinion only on the stage "
-                         "that refines the automatic map (e.g. --set dense_auto.second_opinion=true)")
     best = dense.refine_best(S, T, maps, plan, points=None if points is None else tuple(points))
     hypothesis = best.index
     if points is not None:
@@ -190,9 +193,6 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
     else:
         confidence = best.confidence if len(maps) > 1 else None
         if second_opinion:
-            if "k_init" not in initial or "k_end" not in initial:
-                raise ValueError("corr.dense_refine: second_opinion needs the initial map's k_init and k_end, which "
-                                 "corr.dense_init records; give 'initial' those keys (or second_opinion: false)")
             best = dense.refine_second_opinion(S, T, best, plan, k_init=int(initial["k_init"]),
                                                k_end=int(initial["k_end"]))
     out = {"vertex_map": map_to_original(S, T, best.p2p), "hypothesis": hypothesis,

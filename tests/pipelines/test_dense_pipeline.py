@@ -425,8 +425,8 @@ def test_dense_sparse_confidence_reads_the_points_before_they_are_held():
 
 def test_dense_refine_asks_for_the_second_opinion_with_the_inits_sizes_in_the_automatic_mode_only(monkeypatch):
     """``second_opinion``: the automatic map goes to ``refine.second_opinion`` with the k_init / k_end its initial
-    map was made with (recorded by ``corr.dense_init``), and the map it returns is the stage's; never asked by
-    by default, and an error with given points (it would do nothing there)."""
+    map was made with (recorded by ``corr.dense_init``), and the map it returns is the stage's; not asked by
+    default, and an error with given points (it would do nothing there)."""
     from corr_core.correspondence import dense
     from corr_core.correspondence.dense import map_from_points, mesh_basis
     from corr_core.generate import humanoid

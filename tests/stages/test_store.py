@@ -6,7 +6,7 @@ import sys
 import textwrap
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.helpers import ROOT
 
 # Puts and reads back one entry in a fresh interpreter, then prints whether zarr got imported.
 _PUT_GET = textwrap.dedent("""
