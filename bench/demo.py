@@ -10,7 +10,8 @@ runs its own code (cwd and PYTHONPATH = that tree); the working tree runs this c
 (baseline, current, baseline, current, ... for ``--repeats N``) so a load change on the shared machine hits
 both. Printed: the wall seconds of each run and the median ratio current/baseline; the generation seconds (from
 the time the ``generating dataset`` line is printed to the next other line: generators plus planning again) and
-the CPU seconds of the run process and its workers (less sensitive to other jobs than wall);
+the CPU seconds of the run process and its workers (less sensitive to other jobs than wall); the wall and CPU
+seconds of the same command run again at once (``noop``: everything cached, nothing runs);
 per stage the task seconds of the summary (``stages -> seconds``: summed over the workers) and their ratio;
 whether ``python -m stages results pipeline.yaml --json`` is identical between the two (``--same-results-ref
 REF``: also against one cold run of REF). ``--profile``: cProfile top 20 (cumulative) of the slowest task of each
@@ -91,13 +92,19 @@ def cold_run(tree: str, work: str, name: str, workers: int) -> dict:
     if proc.wait():
         raise SystemExit(f"{name}: {' '.join(cmd)} failed in {tree}:\n{''.join(lines[-30:])}")
     cpu = children_cpu() - cpu0
+    noop_cpu0, t1 = children_cpu(), time.perf_counter()   # the same command again: everything cached
+    stages_cli(tree, ["run", PIPELINE, "--cache", cache, "--out", out, "--workers", str(workers)], check=True,
+               capture_output=True)
+    noop, noop_cpu = time.perf_counter() - t1, children_cpu() - noop_cpu0
     with open(summary) as f:
         stages = {k: v["seconds"] for k, v in json.load(f)["stages"].items()}
     results = stages_cli(tree, ["results", PIPELINE, "--cache", cache, "--json"], check=True,
                          capture_output=True).stdout
     gen = gen_end - gen_start if gen_start is not None and gen_end is not None else float("nan")
-    print(f"  {name}: {wall:.1f} s wall, {cpu:.1f} s CPU (generation {gen:.1f} s)", flush=True)
-    return {"wall": wall, "cpu": cpu, "generation": gen, "stages": stages, "results": results, "cache": cache}
+    print(f"  {name}: {wall:.1f} s wall, {cpu:.1f} s CPU (generation {gen:.1f} s); no-op rerun {noop:.2f} s wall, "
+          f"{noop_cpu:.2f} s CPU", flush=True)
+    return {"wall": wall, "cpu": cpu, "generation": gen, "noop": noop, "noop_cpu": noop_cpu, "stages": stages,
+            "results": results, "cache": cache}
 
 
 def leaves(value, path=""):
@@ -195,9 +202,9 @@ def main() -> None:
             base.append(cold_run(base_tree, work, f"baseline-{i + 1}", args.workers))
             cur.append(cold_run(ROOT, work, f"current-{i + 1}", args.workers))
         print(f"\nmedians of {args.repeats} (load average now {os.getloadavg()[0]:.1f}):")
-        for what in ("wall", "cpu", "generation"):
+        for what in ("wall", "cpu", "generation", "noop", "noop_cpu"):
             b, c = (statistics.median(r[what] for r in runs) for runs in (base, cur))
-            print(f"  {what + ' s':<13} baseline {b:7.1f}  current {c:7.1f}  ratio {ratio(c, b)}")
+            print(f"  {what + ' s':<13} baseline {b:7.2f}  current {c:7.2f}  ratio {ratio(c, b)}")
         rows = stage_table(base, cur)
         print()
         compare_results(base[0]["results"], cur[0]["results"], f"current vs baseline {base_commit}")
