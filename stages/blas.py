@@ -30,13 +30,8 @@ def one_blas_thread() -> Iterator[None]:
         with threadpoolctl.threadpool_limits(1):
             yield
     finally:
-        put_back_environ(before)
-
-
-def put_back_environ(before: dict[str, str | None]) -> None:
-    """Set each variable of ``before`` in this process's environment back to its value (None: unset)."""
-    for var, value in before.items():
-        if value is None:
-            os.environ.pop(var, None)
-        else:
-            os.environ[var] = value
+        for var, value in before.items():
+            if value is None:
+                os.environ.pop(var, None)
+            else:
+                os.environ[var] = value

@@ -186,23 +186,6 @@ MAX_PIPELINE_BYTES = 4 * 2**20
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
 
 
-def named_functions(path: str) -> list[str]:
-    """The stage functions and generators a pipeline file names (``stages.*.function``, ``generated.*.generator``),
-    read without checking or interpolating anything: [] when the file cannot be read or parsed
-    (``load_pipeline`` then says why). For a head start only (``run`` starts its workers' imports with it)."""
-    try:
-        raw, _ = parse_yaml(_read_text(path))
-    except Exception:  # noqa: BLE001 -- load_pipeline reports it, with the file and line
-        return []
-    names = []
-    for section, key in (("stages", "function"), ("generated", "generator")):
-        specs = raw.get(section) if isinstance(raw, dict) else None
-        for spec in specs.values() if isinstance(specs, dict) else ():
-            if isinstance(spec, dict) and isinstance(spec.get(key), str):
-                names.append(spec[key])
-    return names
-
-
 def _check_name(name: Any, err, where: tuple, what: str) -> str:
     """``name`` if it is a plain identifier (letters, digits, '_' and '-', not starting with a digit or '-'):
     names become file and folder names under the output folder and the cache, so no '/', '..' or spaces."""

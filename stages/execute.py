@@ -14,15 +14,17 @@ import logging
 import os
 import re
 import shutil
+import signal
 import statistics
 import sys
+import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 from . import registry
 from .blas import BLAS_THREAD_ENVIRON, one_blas_thread
 from .errors import UserError, warn_once
-from .forkserver import ctrl_c_ignored_by_children
 from .plan import Plan, Task, build_plan
 from .status import run_lines
 from .store import Store
@@ -121,15 +123,13 @@ WORKER_PRELOAD = "stages.worker_boot"   # run by each local worker at start: ign
 
 
 def make_client(workers: int = 2, scheduler: str | None = None, local_dir: str | None = None,
-                memory_limit: str = "auto", log=None, fork: bool = False):
+                memory_limit: str = "auto", log=None):
     """A dask.distributed Client: to ``scheduler`` if given, else a LocalCluster of ``workers`` processes.
 
     The local cluster's dashboard listens on 127.0.0.1 only; ``log`` (a print-like function) receives its URL.
     Its worker processes ignore Ctrl-C: the client process alone handles it and shuts them down cleanly. Each
     runs ``WORKER_PRELOAD`` when it starts (``stages.worker_boot``), importing the plugins this process has
-    imported so far (those of the pipeline it planned). May be called from a thread. ``fork``: the caller holds
-    the fork server (``stages.forkserver.acquire``, with ``worker_process_environ()``): the workers are forked
-    from it; else each is a fresh interpreter (dask's spawn).
+    imported so far (those of the pipeline it planned). May be called from a thread.
     dask's own log is kept to CRITICAL: a worker that dies is reported by ``execute`` as its task's failure, not
     by the surviving workers' connection-reset tracebacks.
 
@@ -145,10 +145,8 @@ def make_client(workers: int = 2, scheduler: str | None = None, local_dir: str |
     dask.config.set({"distributed.worker.daemon": True, "distributed.admin.tick.limit": "60s",
                      "distributed.worker.memory.terminate": False,
                      "distributed.nanny.pre-spawn-environ": dict(WORKER_ENVIRON),
-                     "distributed.worker.preload": [WORKER_PRELOAD],
-                     "distributed.worker.multiprocessing-method": "forkserver" if fork else "spawn",
-                     **worker_profile_config()})
-    with ctrl_c_ignored_by_children():
+                     "distributed.worker.preload": [WORKER_PRELOAD], **worker_profile_config()})
+    with _ctrl_c_ignored_by_children():
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                dashboard_address=DASHBOARD_ADDRESS, local_directory=local_dir,
                                memory_limit=memory_limit, silence_logs=logging.CRITICAL,
@@ -158,13 +156,6 @@ def make_client(workers: int = 2, scheduler: str | None = None, local_dir: str |
     if log is not None and cluster.dashboard_link:
         log(f"dask dashboard: {cluster.dashboard_link}")
     return Client(cluster)
-
-
-def worker_process_environ() -> dict[str, str]:
-    """The variables a local worker process starts with: ``WORKER_ENVIRON``, and the hash seed dask's nanny gives
-    the workers it spawns (6640, whatever this process has), so that a worker forked from the fork server
-    (``stages.forkserver``, started with these) hashes strings as a spawned one does."""
-    return {**{var: str(value) for var, value in WORKER_ENVIRON.items()}, "PYTHONHASHSEED": "6640"}
 
 
 def worker_profile_config() -> dict:
@@ -206,6 +197,20 @@ def scheduler_timeout() -> float:
         raise UserError(f"{SCHEDULER_TIMEOUT_ENV}={text!r} is not a positive number of seconds",
                         fix=f"set it to e.g. {SCHEDULER_TIMEOUT_S} (seconds to wait for --scheduler), or unset it")
     return seconds
+
+
+@contextmanager
+def _ctrl_c_ignored_by_children():
+    """Ignore SIGINT while worker processes start, so they inherit "ignore" (a Ctrl-C to the process group
+    then reaches only this process, which closes the cluster): no traceback from every worker."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def execute(tasks: list[Task], store: Store, client=None, quiet: bool = False, stream=None,

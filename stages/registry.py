@@ -371,19 +371,6 @@ def imported_plugins() -> list[str]:
     return [p.name for p in _PLUGINS.values() if p.modules and p.name not in waiting]
 
 
-def plugins_naming(functions: Iterable[str]) -> list[str]:
-    """The names of the loaded plugins that register one of ``functions`` (dotted names, e.g. ``"corr.mesh"``),
-    found without importing any plugin's ``modules`` (by their ``namespaces``), in load order: what a worker for
-    a pipeline naming those functions imports (``import_plugins``). A name no plugin holds is left out."""
-    load_library()
-    functions = [f for f in functions if isinstance(f, str)]
-    spaces = {f.split(".", 1)[0] for f in functions}
-    with _IMPORT_LOCK:
-        modules = {_REGISTRY[f].module for f in functions if f in _REGISTRY}
-    return [p.name for p in _PLUGINS.values()
-            if spaces & set(p.namespaces) or any(p.owns(m) for m in modules)]
-
-
 def import_plugins(plugin_names: Iterable[str]) -> None:
     """Import the ``modules`` of the loaded plugins named (see :func:`imported_plugins`)."""
     load_library()

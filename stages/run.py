@@ -12,10 +12,8 @@ import os
 import sys
 import time
 
-from . import forkserver, registry
-from .config import named_functions
 from .errors import CorruptEntry, UserError, warn_once
-from .execute import clean_tmp, execute_rounds, worker_process_environ
+from .execute import clean_tmp, execute_rounds
 from .generated import write_generated
 from .plan import Plan, build_plan, plan_pipeline
 from .publish import check_output_folder, publish, verify_published, write_output_file
@@ -98,17 +96,6 @@ def run(path: str, overrides=(), workers: int = 2, scheduler: str | None = None,
     Returns the summary dict (per stage: tasks, executed, cached, failed, skipped, seconds).
     Raises RunFailed when a task failed (after everything else finished and was stored).
     """
-    # the workers' imports start now, on the core planning leaves idle (stages.forkserver); held until the end
-    head_start = workers > 0 and not scheduler and not dry and client_getter is None
-    plugins = registry.plugins_naming(named_functions(path)) if head_start else None
-    with forkserver.held(plugins, worker_process_environ()):
-        return _run(path, overrides, workers, scheduler, dry, cache_dir, output_dir, quiet, summary_json,
-                    client_getter, max_repairs, targets, force)
-
-
-def _run(path, overrides, workers, scheduler, dry, cache_dir, output_dir, quiet, summary_json, client_getter,
-         max_repairs, targets, force) -> dict:
-    """``run``'s work, once the fork server is started (when it is)."""
     log = stderr_log(quiet)
     t0 = time.time()
     plan = plan_pipeline(path, overrides, cache_dir, output_dir, quiet, targets=targets, force=force)

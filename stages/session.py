@@ -9,8 +9,7 @@ import time
 from contextlib import contextmanager
 from typing import Any, Callable, Iterator
 
-from . import forkserver, registry
-from .execute import make_client, worker_process_environ
+from .execute import make_client
 
 
 def stderr_log(quiet: bool) -> Callable[..., None]:
@@ -27,8 +26,7 @@ def client_session(workers: int, scheduler: str | None, cache_dir: str,
     ``get.start_early()`` starts it in a thread now (a local cluster takes about a second, and its workers then
     import the stage library): the caller goes on preparing (writing generated datasets) meanwhile, and the
     first ``get()`` waits for it. Its log lines (the dashboard address) are printed then, in order; an error
-    starting it is raised by ``get()``. A local cluster's workers are forked from the fork server
-    (``stages.forkserver``), held from the cluster's start to its close (``run`` may have started it earlier)."""
+    starting it is raised by ``get()``."""
     holder: dict[str, Any] = {}
     lock = threading.Lock()
 
@@ -42,10 +40,7 @@ def client_session(workers: int, scheduler: str | None, cache_dir: str,
                 else:
                     local = os.path.join(cache_dir, "tmp", "dask-worker-space")
                     os.makedirs(local, exist_ok=True)
-                    holder["forked"] = not scheduler and forkserver.acquire(registry.imported_plugins(),
-                                                                            worker_process_environ())
-                    holder["client"] = make_client(workers, scheduler, local_dir=local, log=log_to,
-                                                   fork=holder["forked"])
+                    holder["client"] = make_client(workers, scheduler, local_dir=local, log=log_to)
             except BaseException as exc:  # noqa: BLE001 -- raised again by get(), in the caller's thread
                 holder["error"] = exc
 
@@ -80,8 +75,6 @@ def client_session(workers: int, scheduler: str | None, cache_dir: str,
         client = holder.get("client")
         if client is not None:
             close_client(client, own_cluster=not scheduler, log=log)
-        if holder.get("forked"):
-            forkserver.release()
 
 
 # For the client and its local cluster together. From a Ctrl-C to the exit of the process takes 0.7-4.3 s on this

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import sys
 import time
 
 import numpy as np
@@ -180,18 +179,3 @@ def blas_threads(path) -> dict:
     """{"generator": the BLAS threads written in the item file ``path``, "task": this task's BLAS threads}."""
     with open(path, encoding="utf-8") as fh:
         return {"generator": int(fh.read()), "task": _most_blas_threads()}
-
-
-@register("synthetic.worker_facts", fanout="item")
-def worker_facts(path, *, run: int = 0) -> dict:
-    """What the process running this task was started with (tests/stages/test_forkserver.py): its parent's
-    command line and pid, its BLAS / hash-seed / PYTHONPATH variables, ``hash("stages")`` (depends on the hash
-    seed), its BLAS threads, and which of the application's modules the process has imported."""
-    parent = os.getppid()
-    with open(f"/proc/{parent}/cmdline", "rb") as fh:
-        parent_cmd = fh.read().replace(b"\0", b" ").decode(errors="replace")
-    variables = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "PYTHONHASHSEED", "PYTHONPATH")
-    application = sorted(m for m in ("shapecorr.alignment", "corr_core", "open3d") if m in sys.modules)
-    return {"parent": parent, "parent_cmd": parent_cmd, "env": {v: os.environ.get(v) for v in variables},
-            "hash": hash("stages"), "blas_threads": _most_blas_threads(), "run": run, "path": str(path),
-            "application": application}

@@ -104,9 +104,8 @@ def test_kill_9_then_resume_equals_uninterrupted_run(tmp_path):
 
 
 def _worker_processes(pid: int) -> list:
-    """[(user CPU seconds, process)] of the dask worker processes (started by the nannies) under ``pid``: forked
-    by the fork server (stages.forkserver; the server itself is ``pid``'s child) or spawned; a child that exits
-    meanwhile, or is a zombie not yet reaped, is left out (reading it raised psutil.ZombieProcess)."""
+    """[(user CPU seconds, process)] of the dask worker processes (started by the nannies) under ``pid``; a child
+    that exits meanwhile, or is a zombie not yet reaped, is left out (reading it raised psutil.ZombieProcess)."""
     import psutil
 
     out = []
@@ -116,10 +115,9 @@ def _worker_processes(pid: int) -> list:
         return out
     for child in children:
         try:
-            forked = child.ppid() != pid and "multiprocessing.forkserver" in " ".join(child.parent().cmdline())
-            if forked or "spawn_main" in " ".join(child.cmdline()):
+            if "spawn_main" in " ".join(child.cmdline()):
                 out.append((child.cpu_times().user, child))
-        except (psutil.Error, AttributeError):   # AttributeError: no parent any more
+        except psutil.Error:
             continue
     return out
 

@@ -114,17 +114,3 @@ def test_every_command_has_help(tmp_path):
     for cmd in ([], ["run"], ["status"], ["sweep"], ["results"], ["gc"], ["report"], ["functions"]):
         res = cli_main([*cmd, "--help"], cwd=tmp_path)
         assert res.returncode == 0 and "usage:" in res.stdout, cmd
-
-
-def test_the_functions_a_pipeline_file_names_are_read_without_checking_it(tmp_path):
-    """run's head start (stages.forkserver): the names only; a file load_pipeline refuses gives none, no error."""
-    from stages.config import named_functions
-
-    p = make_project(tmp_path, n=0, yaml_text=SYNTHETIC_YAML.replace(
-        "name: syn\n", "name: syn\ngenerated:\n  g: {generator: synthetic.write_blas_threads}\n"))
-    assert named_functions(str(p)) == ["synthetic.features", "synthetic.pair_distances", "synthetic.summarize",
-                                       "synthetic.report", "synthetic.write_blas_threads"]
-    (tmp_path / "bad.yaml").write_text("stages: [unclosed\n")
-    (tmp_path / "odd.yaml").write_text("stages: {a: 3, b: {function: 4}}\ngenerated: []\n")
-    assert named_functions(str(tmp_path / "bad.yaml")) == named_functions(str(tmp_path / "odd.yaml")) == []
-    assert named_functions(str(tmp_path / "missing.yaml")) == []

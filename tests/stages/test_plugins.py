@@ -196,14 +196,3 @@ def test_a_plugins_worker_warmup_imports_and_calls_its_entries_and_skips_those_t
     assert "warm_plugin_mod.funcs" in sys.modules
     registry.warm_up([])
     assert sys.modules["warm_plugin_mod.extra"].CALLS == ["mark"]     # only the plugins named
-
-
-def test_the_plugins_a_pipeline_names_are_found_without_importing_their_modules(tmp_path, monkeypatch):
-    """What the fork server preloads for a run (stages.forkserver): the plugins holding the named functions."""
-    import sys
-
-    _lazy_plugin(tmp_path, monkeypatch, "named_plugin_mod", "namedns", "namedns")
-    assert registry.plugins_naming(["namedns.f", "nowhere.x", 3]) == ["named_plugin_mod"]
-    assert "named_plugin_mod.funcs" not in sys.modules
-    assert registry.plugins_naming(["synthetic.features", "nowhere.x"]) == ["synthetic"]   # registered eagerly
-    assert registry.plugins_naming([]) == []
