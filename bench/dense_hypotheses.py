@@ -115,20 +115,27 @@ def choice(rows: list[dict]) -> dict:
     which it keeps, its confidence, and whether that map is right (landmark accuracy >= 0.5). Rows of a file
     without ``step_distortions`` count as never dropped (and are compared by their last distortion)."""
     from corr_core.correspondence.dense.init import hypotheses_to_refine
-    from corr_core.correspondence.dense.refine import best_refined, surviving_after_step
+    from corr_core.correspondence.dense.refine import (EARLY_DROP_MARGIN, best_refined, surviving_after_step,
+                                                       surviving_hypotheses)
 
     n = hypotheses_to_refine([r["chirality"] for r in rows], [r["wks"] for r in rows])
     steps = [r.get("step_distortions", [None, r["distortion"]])[1:] for r in rows[:n]]   # after each step
-    alive, got = list(range(n)), [len(s) for s in steps]
+    alive, got, early = list(range(n)), [len(s) for s in steps], ()
     if all(len(s) > 1 for s in steps):
-        got = [1] * n
+        if n > 1 and all("round_distortions" in r for r in rows[:n]):   # after the first round of the first step
+            early = tuple(r["round_distortions"][0] if r["round_distortions"] else r["step_distortions"][0]
+                          for r in rows[:n])
+            alive = surviving_hypotheses(early, drop_margin=EARLY_DROP_MARGIN)
+        got = [1 if i in alive else 0 for i in range(n)]
         for k in range(1, len(steps[0])):                     # after step k, before the last
             alive = surviving_after_step([s[:got[i]] for i, s in enumerate(steps)], alive)
             for i in alive:
                 got[i] = k + 1
-    best = best_refined([np.zeros(0, dtype=np.int64)] * n, [s[:got[i]] for i, s in enumerate(steps)], alive=alive)
+    best = best_refined([np.zeros(0, dtype=np.int64)] * n, [s[:got[i]] for i, s in enumerate(steps)], alive=alive,
+                        early=early)
     kept = rows[best.index]
     return {"refined": n, "dropped": sum(best.dropped), "dropped_later": sum(1 < g < len(steps[0]) for g in got),
+            "dropped_early": sum(g == 0 for g in got),
             "kept": best.index, "confidence": best.confidence, "margin": best.margin,
             "right": kept["landmark_accuracy"] >= 0.5, "mean_error": kept["mean_error"],
             "twisted": kept["landmark_accuracy"] >= 0.5 and kept["mean_error"] > TWISTED_ERROR}
@@ -320,9 +327,11 @@ def main(argv=None) -> int:
     print(f"\n{len(results)} targets, seeds {args.seeds}: {len(wrong)} flipped ({flipped}); mean error of the kept "
           f"maps {np.mean([r['mean_error'] for r in results]):.4f}")
     dropped_later = sum(r['dropped_later'] for r in results)
-    print(f"hypotheses refined: {sum(r['refined'] for r in results)}, of which dropped after the first step: "
-          f"{sum(r['dropped'] for r in results) - dropped_later}, after a later step: {dropped_later} (of the "
-          f"{sum(r['refined'] - 1 for r in results)} not kept)")
+    dropped_early = sum(r.get('dropped_early', 0) for r in results)
+    print(f"hypotheses refined: {sum(r['refined'] for r in results)}, of which dropped after the first round of the "
+          f"first step: {dropped_early}, after the first step: "
+          f"{sum(r['dropped'] for r in results) - dropped_later - dropped_early}, after a later step: "
+          f"{dropped_later} (of the {sum(r['refined'] - 1 for r in results)} not kept)")
     first_step_line(results)
     later_steps_line(results)
     rounds_line(results)

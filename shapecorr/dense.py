@@ -144,13 +144,14 @@ def dense_refine(template_basis, target_basis, initial, alternative=None, *,
     "spectral", "none", ...). ``n_patches`` ... ``icp_iterations``: ``refine_extrinsic``'s; ``stiffness``:
     ``refine_deform``'s and ``refine_settle``'s (the defaults of ``n_patches``, ``patch_size`` and ``stiffness``:
     swept by ``python bench/dense_constants.py --seeds 10-13``, docs/dense.md "Tuned constants"). Several initial
-    hypotheses (``corr.dense_init`` with hypotheses > 1): each gets the first step, those surely beaten after a
-    step (not the last) are dropped, the others are refined to the end and the least distorted result kept
+    hypotheses (``corr.dense_init`` with hypotheses > 1): each gets the first step (when that is the patch ICP, one
+    surely beaten after its first round gets none of the others: ``refine.EARLY_DROP_MARGIN``), those surely
+    beaten after a step (not the last) are dropped, the others are refined to the end and the least distorted result kept
     (``refine.refine_best``).
     Returns {"vertex_map": (n_template,) int target vertex id (original ids; -1 off the template's kept
     component), "hypothesis": index of the kept initial map (0: the best ranked), "distortions": (h,)
-    ``map_distortion`` of every hypothesis after the last step it got, "dropped": (h,) bool, dropped before the
-    last step, "confidence": float in [0, 1], no ground truth needed (several hypotheses: ``BestMap.confidence``,
+    ``map_distortion`` of every hypothesis after the last step it got (after the first round of the first step,
+    for one dropped there), "dropped": (h,) bool, dropped before the last step, "confidence": float in [0, 1], no ground truth needed (several hypotheses: ``BestMap.confidence``,
     the kept map's distortion margin over the runner-up; given points: ``points_agreement``, the fraction of them
     the kept map kept before the refinement held them -- the starting map made from them, or the alternative as
     given: points that no near-isometric map keeps all of, e.g. left and right swapped, score low; absent with a

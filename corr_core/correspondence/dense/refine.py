@@ -634,6 +634,14 @@ DROP_MARGIN = 0.30
 # made with 95 hypotheses fewer refined to the end, and none flipped. 0.15 leaves room above the 1.057 seen, and
 # spares the last step (``refine_deform``, the costliest after the first) most runner-ups the first step kept.
 LATER_DROP_MARGIN = 0.15
+# Before that: after the first round of the first step (``refine_extrinsic``'s 5 rounds; the rest of the step then
+# continues the survivors, the same maps bit for bit: a round starts from the map alone), a hypothesis this much
+# (relative) more distorted than the least distorted one is dropped, saving it the step's other rounds. One round
+# judges less surely than the step: on 238 generated targets (`python bench/dense_hypotheses.py --seeds 0-16
+# --candidates 3 --decimated` and `--seeds 17-33`, 2026-12-08, docs/dense.md "Confidence") the right map was at
+# most 1.496 times the least distorted one after one round (1.427 on 2026-12-02); 0.65 leaves 10 % above that, as
+# the other margins do, and drops 21 of the 368 runner-ups there, never the kept map.
+EARLY_DROP_MARGIN = 0.65
 
 
 @dataclass(frozen=True)
@@ -641,27 +649,32 @@ class BestMap:
     """The result of ``refine_best``: p2p (n_s,) int local ids of the kept refined map, index: its position among
     the hypotheses, distortions: ``map_distortion`` of every hypothesis after the last step it was refined by
     (same order), dropped: which hypotheses were dropped before the last step (empty: none), step_distortions:
-    every hypothesis's ``map_distortion`` after each step it got (empty when none was dropped), scores: what the
-    choice compared (``refinement_score``; empty: the distortions)."""
+    every hypothesis's ``map_distortion`` after each step it got (empty when none was dropped; () for one dropped
+    after the first round of the first step), scores: what the choice compared (``refinement_score``; empty: the
+    distortions), early: every hypothesis's ``map_distortion`` after that first round (empty: not measured)."""
     p2p: np.ndarray
     index: int
     distortions: tuple[float, ...]
     dropped: tuple[bool, ...] = ()
     step_distortions: tuple[tuple[float, ...], ...] = ()
     scores: tuple[float, ...] = ()
+    early: tuple[float, ...] = ()
 
     @property
     def margin(self) -> float:
         """(runner-up's score - kept one's) / kept one's: >= 0, each other hypothesis compared with the kept
         one on the same footing (a dropped one: their ``refinement_score`` over the steps it got, where it was
-        dropped); inf with a single hypothesis (nothing to compare with) or a kept map of zero distortion."""
+        dropped; one dropped after the first round: their distortions then); inf with a single hypothesis (nothing
+        to compare with) or a kept map of zero distortion."""
         scores = self.scores or self.distortions
         margins = []
         for i, d in enumerate(scores):
             if i == self.index:
                 continue
             kept, other = scores[self.index], d
-            if self.dropped and self.dropped[i]:
+            if self.dropped and self.dropped[i] and not self.step_distortions[i]:   # after the first round
+                kept, other = self.early[self.index], self.early[i]
+            elif self.dropped and self.dropped[i]:
                 got = len(self.step_distortions[i])
                 kept = refinement_score(self.step_distortions[self.index][:got])
                 other = refinement_score(self.step_distortions[i])
@@ -725,34 +738,40 @@ def refinement_score(step_distortions: Sequence[float]) -> float:
 
 
 def best_refined(maps: Sequence[np.ndarray], step_distortions: Sequence[Sequence[float]], *,
-                 alive: Sequence[int] | None = None) -> BestMap:
+                 alive: Sequence[int] | None = None, early: Sequence[float] = ()) -> BestMap:
     """The choice ``refine_best`` makes among refined hypotheses: the lowest ``refinement_score`` among those
     refined to the end (ties to the earlier one).
 
     Args: maps: h refined maps ((n_s,) int local ids); step_distortions: h sequences, each hypothesis's
         ``map_distortion`` after every step it got (a dropped one: those before it was dropped); alive: the
-        indices refined to the end (``surviving_after_step``; None: all).
+        indices refined to the end (``surviving_after_step``; None: all); early: every hypothesis's distortion
+        after the first round of the first step, when measured (a hypothesis dropped there has no step
+        distortion: this one is its distortion).
     Returns: ``BestMap`` (dropped and step_distortions recorded when some hypothesis was dropped).
     """
     alive = range(len(maps)) if alive is None else alive
-    distortions = tuple(float(s[-1]) for s in step_distortions)
+    early = tuple(float(d) for d in early)
+    distortions = tuple(float(s[-1]) if len(s) else early[i] for i, s in enumerate(step_distortions))
     scores = tuple(refinement_score(s) if i in alive else float("inf") for i, s in enumerate(step_distortions))
     best = min(alive, key=lambda i: (scores[i], i))
     dropped = tuple(i not in alive for i in range(len(maps)))
     if not any(dropped):
-        return BestMap(maps[best], best, distortions, scores=scores)
+        return BestMap(maps[best], best, distortions, scores=scores, early=early)
     steps = tuple(tuple(float(d) for d in s) for s in step_distortions)
-    return BestMap(maps[best], best, distortions, dropped, steps, scores)
+    return BestMap(maps[best], best, distortions, dropped, steps, scores, early)
 
 
 def refine_best(source: MeshBasis, target: MeshBasis, maps: list,
                 refine: str | Sequence | None = DEFAULT_REFINE, options: Mapping | None = None, *,
                 drop_margin: float = DROP_MARGIN, later_margin: float = LATER_DROP_MARGIN,
+                early_margin: float = EARLY_DROP_MARGIN,
                 points: tuple[np.ndarray, np.ndarray] | None = None) -> BestMap:
     """Refine each of several hypothesis maps (``refine_map``) and keep the best: the lowest
     ``refinement_score`` (geometric mean of the distortion after each step).
 
-    Every hypothesis gets the plan's first step; one then more distorted than the least distorted by more than
+    Every hypothesis gets the plan's first step (when that is ``extrinsic``: its first round, then the rest of it
+    for those whose distortion after that round is within ``early_margin`` of the least one's, ``first_round_split``:
+    the others are dropped already); one then more distorted than the least distorted by more than
     ``drop_margin`` (relative: already surely beaten, ``surviving_hypotheses``) is dropped, the others get the
     next step; after each later step but the last, one whose ``refinement_score`` so far is more than
     ``later_margin`` above the least is dropped too (``surviving_after_step``).
@@ -769,16 +788,38 @@ def refine_best(source: MeshBasis, target: MeshBasis, maps: list,
     if len(maps) == 1 or len(plan) <= 1:
         refined = [refine_map(source, target, m, plan, points=points) for m in maps]
         return best_refined(refined, [[map_distortion(source, target, m)] for m in refined])
-    refined = [plan[0].run(source, target, m, points) for m in maps]
-    steps = [[map_distortion(source, target, m)] for m in refined]
-    alive = surviving_after_step(steps, range(len(maps)), drop_margin=drop_margin, later_margin=later_margin)
+    ahead, early = list(range(len(maps))), ()
+    split = first_round_split(plan[0])
+    if split is None:
+        refined = [plan[0].run(source, target, m, points) for m in maps]
+    else:               # the first round for all, the rest of the step for those not already beaten
+        refined = [split[0].run(source, target, m, points) for m in maps]
+        early = tuple(map_distortion(source, target, m) for m in refined)
+        ahead = surviving_hypotheses(early, drop_margin=early_margin)
+        refined = [split[1].run(source, target, m, points) if i in ahead else m for i, m in enumerate(refined)]
+    steps = [[map_distortion(source, target, m)] if i in ahead else [] for i, m in enumerate(refined)]
+    alive = surviving_after_step(steps, ahead, drop_margin=drop_margin, later_margin=later_margin)
     for k, step in enumerate(plan[1:], start=2):
         for i in alive:
             refined[i] = step.run(source, target, refined[i], points)
             steps[i].append(map_distortion(source, target, refined[i]))
         if k < len(plan):
             alive = surviving_after_step(steps, alive, drop_margin=drop_margin, later_margin=later_margin)
-    return best_refined(refined, steps, alive=alive)
+    return best_refined(refined, steps, alive=alive, early=early)
+
+
+def first_round_split(step: RefineStep) -> tuple[RefineStep, RefineStep] | None:
+    """``step`` as its first round and the rest, when it is an ``extrinsic`` step of several rounds (not
+    ``only_if_lower``): (the step with ``rounds`` 1, the step with the other rounds); run one after the other they
+    give ``step.run``'s map bit for bit (each round starts from the map alone, and a round that changes nothing
+    ends the step, as it ends the rest at once). None for any other step."""
+    if step.name != "extrinsic" or step.only_if_lower:
+        return None
+    rounds = step.options.get("rounds", inspect.signature(REFINE_STEPS["extrinsic"]).parameters["rounds"].default)
+    if rounds < 2:
+        return None
+    return RefineStep("extrinsic", {**step.options, "rounds": 1}), RefineStep("extrinsic", {**step.options,
+                                                                                            "rounds": rounds - 1})
 
 
 REFINE_STEPS = {"extrinsic": refine_extrinsic, "spectral": refine_spectral, "deform": refine_deform,

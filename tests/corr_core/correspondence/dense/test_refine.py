@@ -265,6 +265,50 @@ def test_refine_best_drops_a_hypothesis_surely_beaten_after_the_first_step(pair,
     assert len(later) == 1 and single.distortions == (d_turned,)
 
 
+def test_the_first_round_and_the_rest_of_the_extrinsic_step_give_its_map_bit_for_bit(pair):
+    from corr_core.correspondence.dense import refine
+
+    S, T = pair
+    start = np.roll(np.arange(S.n), 7)                             # off by a few vertices everywhere
+    step = refine.RefineStep("extrinsic", {"n_patches": 20, "patch_size": 16})
+    one, rest = refine.first_round_split(step)
+    assert one.options["rounds"] == 1 and rest.options["rounds"] == 4 and one.options["n_patches"] == 20
+    after_one = one.run(S, T, start)
+    assert not np.array_equal(after_one, start)                    # the first round did something
+    assert np.array_equal(rest.run(S, T, after_one), step.run(S, T, start))
+    for other in (refine.RefineStep("deform"), refine.RefineStep("extrinsic?"),
+                  refine.RefineStep("extrinsic", {"rounds": 1})):
+        assert refine.first_round_split(other) is None
+
+
+def test_refine_best_drops_a_hypothesis_surely_beaten_after_the_first_round(pair, monkeypatch):
+    """Beyond EARLY_DROP_MARGIN after the first round of the extrinsic step, a hypothesis gets no more of it; the
+    kept map is the one refining both to the end keeps, and the margin compares the two after that round."""
+    from corr_core.correspondence.dense import refine
+
+    S, T = pair
+    truth, turned = np.arange(S.n), _turned_map(S, T)
+    calls = []
+
+    def extrinsic(source, target, p2p, *, rounds=5):
+        calls.append((p2p.copy(), rounds))
+        return p2p
+
+    monkeypatch.setitem(refine.REFINE_STEPS, "extrinsic", extrinsic)
+    monkeypatch.setitem(refine.REFINE_STEPS, "later", lambda source, target, p2p: p2p)
+    d_truth, d_turned = refine.map_distortion(S, T, truth), refine.map_distortion(S, T, turned)
+    assert d_turned > (1 + refine.EARLY_DROP_MARGIN) * d_truth                   # surely beaten after one round
+    best = refine.refine_best(S, T, [turned, truth], ["extrinsic", "later"])
+    assert [(np.array_equal(m, truth), r) for m, r in calls] == [(False, 1), (True, 1), (True, 4)]
+    assert best.index == 1 and np.array_equal(best.p2p, truth)
+    assert best.dropped == (True, False) and best.step_distortions == ((), (d_truth, d_truth))
+    assert best.early == (d_turned, d_truth) and best.distortions == (d_turned, d_truth)
+    assert best.margin == pytest.approx((d_turned - d_truth) / d_truth) and best.confidence == 1.0
+    calls.clear()
+    both = refine.refine_best(S, T, [turned, truth], ["extrinsic", "later"], early_margin=float("inf"))
+    assert [r for _, r in calls] == [1, 1, 4, 4] and np.array_equal(both.p2p, best.p2p) and both.index == 1
+
+
 def test_surviving_hypotheses_and_the_margin_of_a_dropped_one():
     from corr_core.correspondence.dense import BestMap, surviving_hypotheses
 
@@ -276,6 +320,8 @@ def test_surviving_hypotheses_and_the_margin_of_a_dropped_one():
     assert dropped.margin == pytest.approx(0.04) and dropped.confidence == pytest.approx(0.4)   # same-step compare
     later = BestMap(p2p, 0, (0.18, 0.25), dropped=(False, True), step_distortions=((0.2, 0.2, 0.18), (0.2, 0.25)))
     assert later.margin == pytest.approx(np.sqrt(0.2 * 0.25) / 0.2 - 1)          # scores over the same two steps
+    early = BestMap(p2p, 1, (0.5, 0.2), dropped=(True, False), step_distortions=((), (0.2, 0.2)), early=(0.5, 0.25))
+    assert early.margin == pytest.approx(1.0)                               # after the first round: 0.5 / 0.25
 
 
 def test_surviving_after_step_drops_on_the_first_distortion_then_on_the_score_so_far():
