@@ -103,6 +103,14 @@ def scape_layout(data: str, pairs: int | None = None) -> tuple[str, list[str]] |
     return template, tests
 
 
+def checked_layout(ap, data: str, pairs: int) -> tuple[str, list[str]] | None:
+    """``scape_layout(data, pairs)`` for a bench's ``--data`` and ``--pairs`` (``ap``: its ArgumentParser, whose
+    ``error`` exits when ``pairs`` < 1)."""
+    if pairs < 1:
+        ap.error(f"--pairs must be >= 1, got {pairs}")
+    return scape_layout(data, pairs)
+
+
 def read_template(data: str, path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, list, list]:
     """The template mesh at ``path`` and the landmark files of the folder ``data`` (course SCAPE layout): V (n,3)
     float, F (m,3) int, the landmark ids (L,) int and names, and the names of the sparse landmarks."""

@@ -133,13 +133,11 @@ def main(argv=None) -> int:
     modes = args.modes.split(",")
     if set(modes) - {"sparse", "auto"} or not modes:
         ap.error(f"--modes: sparse and/or auto, got {args.modes}")
-    if args.pairs < 1:
-        ap.error(f"--pairs must be >= 1, got {args.pairs}")
-    from bench.correspondence import pair_truth, read_template, scape_layout
+    from bench.correspondence import checked_layout, pair_truth, read_template
     from corr_core.correspondence.dense import basis, init
     from corr_core.geometry.mesh_io import load_mesh
 
-    found = scape_layout(args.data, args.pairs)
+    found = checked_layout(ap, args.data, args.pairs)
     if found is None:
         return 2
     tpl, tests = found

@@ -58,13 +58,11 @@ def main(argv=None) -> int:
     ap.add_argument("--data", default=DEFAULT_DATA, help="a folder in the course SCAPE layout")
     ap.add_argument("--pairs", type=int, default=20, help="the first N test meshes")
     args = ap.parse_args(argv)
-    if args.pairs < 1:
-        ap.error(f"--pairs must be >= 1, got {args.pairs}")
-    from bench.correspondence import read_template, scape_layout
+    from bench.correspondence import checked_layout, read_template
     from corr_core.correspondence.dense import basis, refine
     from corr_core.geometry.mesh_io import load_mesh
 
-    found = scape_layout(args.data, args.pairs)
+    found = checked_layout(ap, args.data, args.pairs)
     if found is None:
         return 2
     tpl, tests = found
