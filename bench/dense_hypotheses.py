@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import glob
-import inspect
 import json
 import os
 import sys
@@ -97,8 +96,8 @@ def extrinsic_by_rounds(S, T, p2p, step):
     run ([floats])."""
     from corr_core.correspondence.dense import refine
 
-    rounds = step.options.get("rounds", inspect.signature(refine.refine_extrinsic).parameters["rounds"].default)
-    one_round = refine.RefineStep("extrinsic", {**step.options, "rounds": 1})
+    split = refine.first_round_split(step)           # None: a step of one round
+    one_round, rounds = (split[0], 1 + split[1].options["rounds"]) if split else (step, 1)
     distortions = []
     for _ in range(rounds):
         new = one_round.run(S, T, p2p)

@@ -672,12 +672,13 @@ class BestMap:
             if i == self.index:
                 continue
             kept, other = scores[self.index], d
-            if self.dropped and self.dropped[i] and not self.step_distortions[i]:   # after the first round
-                kept, other = self.early[self.index], self.early[i]
-            elif self.dropped and self.dropped[i]:
+            if self.dropped and self.dropped[i]:
                 got = len(self.step_distortions[i])
-                kept = refinement_score(self.step_distortions[self.index][:got])
-                other = refinement_score(self.step_distortions[i])
+                if got == 0:                                  # dropped after the first round of the first step
+                    kept, other = self.early[self.index], self.early[i]
+                else:
+                    kept = refinement_score(self.step_distortions[self.index][:got])
+                    other = refinement_score(self.step_distortions[i])
             margins.append((other - kept) / kept if kept > 0 else float("inf"))
         return float(min(margins)) if margins else float("inf")
 
@@ -769,9 +770,9 @@ def refine_best(source: MeshBasis, target: MeshBasis, maps: list,
     """Refine each of several hypothesis maps (``refine_map``) and keep the best: the lowest
     ``refinement_score`` (geometric mean of the distortion after each step).
 
-    Every hypothesis gets the plan's first step (when that is ``extrinsic``: its first round, then the rest of it
-    for those whose distortion after that round is within ``early_margin`` of the least one's, ``first_round_split``:
-    the others are dropped already); one then more distorted than the least distorted by more than
+    Every hypothesis gets the plan's first step (when that is ``extrinsic`` and no points are given: its first
+    round, then the rest of it for those whose distortion after that round is within ``early_margin`` of the least
+    one's, ``first_round_split``: the others are dropped already); one then more distorted than the least distorted by more than
     ``drop_margin`` (relative: already surely beaten, ``surviving_hypotheses``) is dropped, the others get the
     next step; after each later step but the last, one whose ``refinement_score`` so far is more than
     ``later_margin`` above the least is dropped too (``surviving_after_step``).
@@ -789,7 +790,8 @@ def refine_best(source: MeshBasis, target: MeshBasis, maps: list,
         refined = [refine_map(source, target, m, plan, points=points) for m in maps]
         return best_refined(refined, [[map_distortion(source, target, m)] for m in refined])
     ahead, early = list(range(len(maps))), ()
-    split = first_round_split(plan[0])
+    # with given points every part of a step keeps them (RefineStep.run): the split would no longer be the step
+    split = first_round_split(plan[0]) if points is None else None
     if split is None:
         refined = [plan[0].run(source, target, m, points) for m in maps]
     else:               # the first round for all, the rest of the step for those not already beaten

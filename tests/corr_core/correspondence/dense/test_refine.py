@@ -307,6 +307,10 @@ def test_refine_best_drops_a_hypothesis_surely_beaten_after_the_first_round(pair
     calls.clear()
     both = refine.refine_best(S, T, [turned, truth], ["extrinsic", "later"], early_margin=float("inf"))
     assert [r for _, r in calls] == [1, 1, 4, 4] and np.array_equal(both.p2p, best.p2p) and both.index == 1
+    calls.clear()                               # given points are kept after every part: the step is not split
+    points = (S.samples[:3], S.samples[:3])
+    held = refine.refine_best(S, T, [turned, truth], ["extrinsic", "later"], points=points)
+    assert [r for _, r in calls] == [5, 5] and held.early == () and held.index == 1
 
 
 def test_surviving_hypotheses_and_the_margin_of_a_dropped_one():
